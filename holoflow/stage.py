@@ -1,0 +1,100 @@
+"""The stage side of the step protocol (docs/stage-protocol.md).
+
+A stage program is started as ``PROGRAM JOB.json``. It reads its job spec, reads the files of its
+inputs (each input is a directory holding one upstream stage's outputs), writes its outputs under
+``job.output_dir`` and exits 0. Anything it prints is kept as the step's log; lines starting with
+``@progress `` or ``@meta `` carry JSON for the runner. A non-zero exit discards every output.
+
+This module imports nothing heavy, so a stage pays only for what it uses.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+@dataclass
+class Job:
+    """One step's job spec, as written by the runner."""
+
+    stage: str
+    engine: str
+    params: dict[str, Any]
+    seed: int
+    prompt: str
+    inputs: dict[str, Path]
+    output_dir: Path
+    work_dir: Path
+    device: str = "cpu"
+    extra: dict[str, Any] = field(default_factory=dict)
+    _last_progress: float = field(default=0.0, repr=False)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Job":
+        spec = json.loads(Path(path).read_text())
+        return cls(
+            stage=spec["stage"],
+            engine=spec["engine"],
+            params=dict(spec.get("params", {})),
+            seed=int(spec.get("seed", 0)),
+            prompt=spec.get("prompt", ""),
+            inputs={k: Path(v) for k, v in spec.get("inputs", {}).items()},
+            output_dir=Path(spec["output_dir"]),
+            work_dir=Path(spec.get("work_dir", spec["output_dir"])),
+            device=spec.get("device", "cpu"),
+            extra={k: v for k, v in spec.items() if k not in _KNOWN},
+        )
+
+    @classmethod
+    def from_argv(cls, argv: list[str] | None = None) -> "Job":
+        argv = sys.argv[1:] if argv is None else argv
+        if len(argv) != 1:
+            raise SystemExit("usage: STAGE_PROGRAM JOB.json  (started by `holoflow run`)")
+        return cls.load(argv[0])
+
+    def input(self, name: str) -> Path:
+        """Directory holding the files of input ``name`` (an upstream stage's outputs)."""
+        try:
+            return self.inputs[name]
+        except KeyError:
+            raise SystemExit(f"{self.stage}: input '{name}' missing from job spec "
+                             f"(has: {sorted(self.inputs)}); check pipeline.yaml") from None
+
+    def input_file(self, name: str, filename: str) -> Path:
+        path = self.input(name) / filename
+        if not path.exists():
+            raise SystemExit(f"{self.stage}: input '{name}' has no file '{filename}' "
+                             f"(has: {sorted(p.name for p in self.input(name).iterdir())})")
+        return path
+
+    def output(self, filename: str) -> Path:
+        """Path for an output file (subfolders allowed); its parent is created."""
+        path = (self.output_dir / filename).resolve()
+        if self.output_dir.resolve() not in path.parents:
+            raise ValueError(f"output name escapes the output folder: {filename!r}")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return path
+
+    def progress(self, done: int, total: int, what: str = "", every_s: float = 0.2) -> None:
+        """Report progress of a long loop; rate-limited so tight loops stay cheap."""
+        now = time.monotonic()
+        if done < total and now - self._last_progress < every_s:
+            return
+        self._last_progress = now
+        emit("progress", {"done": int(done), "total": int(total), "what": what})
+
+    def meta(self, **info: Any) -> None:
+        """Add provenance (model identity, metrics, engine facts) to the step's record."""
+        emit("meta", info)
+
+
+def emit(kind: str, payload: dict[str, Any]) -> None:
+    sys.stdout.write(f"@{kind} {json.dumps(payload, sort_keys=True, default=str)}\n")
+    sys.stdout.flush()
+
+
+_KNOWN = {"stage", "engine", "params", "seed", "prompt", "inputs", "output_dir", "work_dir", "device"}
