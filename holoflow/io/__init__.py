@@ -1,0 +1,1 @@
+"""File formats: EXR images (holoflow.io.exr) and PLY point clouds / Gaussians (holoflow.io.ply)."""
