@@ -1,0 +1,63 @@
+"""pipeline.yaml resolution: profiles, --set typing, DAG order; cache-key reasons; the real pipeline loads."""
+from pathlib import Path
+
+import pytest
+
+from holoflow import pipeline
+from holoflow.cachekey import cache_key, components, reasons, source_digest
+
+ROOT = Path(__file__).resolve().parents[2]
+FIXTURES = Path(__file__).parent / "fixtures"
+
+
+def test_profile_then_set_precedence():
+    p = pipeline.load(FIXTURES / "pipeline.yaml")
+    r = pipeline.resolve(p, "big", ["gen.n=7"])
+    assert r["gen"].engine == "fancy" and r["gen"].params["n"] == 7
+    assert r["gen"].overrides == {"n": "--set", "engine": "profile big"}
+    assert pipeline.resolve(p)["gen"].params["n"] == 2          # default_profile small
+
+
+@pytest.mark.parametrize("item, key, value", [
+    ("upper.scale=1", "scale", 1.0),           # int accepted for a float param, stored as float
+    ("upper.mode=123", "mode", "123"),         # a string param keeps the text
+    ("upper.mode=", "mode", ""),
+    ("upper.mode=null", "mode", "null"),
+    ("gen.fail=true", "fail", True),
+    ("upper.sleep=2.5e-1", "sleep", 0.25),
+])
+def test_set_typing(item, key, value):
+    p = pipeline.load(FIXTURES / "pipeline.yaml")
+    stage = item.split(".")[0]
+    got = pipeline.resolve(p, None, [item])[stage].params[key]
+    assert got == value and type(got) is type(value)
+
+
+def test_real_pipeline_is_valid_and_ordered():
+    p = pipeline.load(ROOT / "pipeline.yaml")
+    order = list(p.stages)
+    for s in p.stages.values():
+        assert all(order.index(u) < order.index(s.name) for u in s.inputs.values())
+    for prof in p.profiles:
+        pipeline.resolve(p, prof)
+    assert p.downstream({"detail"}) >= {"tangent_depth", "transfer_opt"}
+    assert "base_pano" in p.upstream({"point_cloud"})
+
+
+def test_python_digest_ignores_comments_not_code():
+    a = source_digest(".py", b"x = 1  # one\n")
+    assert a == source_digest(".py", b"# header\n\nx  =  1\n")
+    assert a != source_digest(".py", b"x = 2\n")
+    assert source_digest(".txt", b"a") != source_digest(".txt", b"a ")
+
+
+def test_reasons_in_words():
+    old = components("detail", {"a.py": "1"}, "classical", {"strength": 0.5}, {"pano": {"stage": "upscale",
+                     "tree": "t1"}}, 0, "cabin")
+    new = components("detail", {"a.py": "2"}, "controlnet_tile", {"strength": 0.7},
+                     {"pano": {"stage": "upscale", "tree": "t2"}}, 1, "temple")
+    assert cache_key(old) != cache_key(new) and cache_key(old) == cache_key(dict(old))
+    assert reasons(old, new) == ["engine changed: classical -> controlnet_tile",
+                                 "params changed: detail.strength 0.5 -> 0.7", "code changed: a.py",
+                                 "input changed: upscale", "seed changed: 0 -> 1",
+                                 'prompt changed: "cabin" -> "temple"']
