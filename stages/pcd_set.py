@@ -1,0 +1,89 @@
+"""pcd_set: P_s seen by the supplementary cameras through a z-buffer (the PCD set + missing masks).
+
+For every base camera of pano_set's cameras.json, four supplementary cameras (above, below, left,
+right; holoflow.geometry.rigs.supplementary_rig) are moved by ``offset`` x that base view's median
+scene depth (the median z of P_s's z-buffer from the base camera) and turned ``angle_deg`` back
+towards the base view's axis. P_s (point_cloud's ps.ply) is projected into each with a z-buffer,
+nearest point wins, each point covering (2 R - 1)^2 pixels: R = ``splat_radius``, or with 0 (auto) each
+point's own footprint (holoflow.geometry.pointcloud.footprint_radius, from P_s's angular step
+2 pi / width, width = sqrt(2 N) since P_s keeps every pixel of its width x width/2 grid), so the
+missing pixels are disocclusions rather than sampling gaps. Writes views/NNN_K.exr
+(R,G,B linear; A = 1 where a point landed, 0 = missing; K = 0 above, 1 below, 2 left, 3 right),
+cameras.json (kind "supplementary", base = base camera index) and transforms.json.
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+
+
+def main() -> int:
+    from holoflow.stage import Job
+
+    job = Job.from_argv()
+    import kornia
+    import torch
+
+    torch.set_num_threads(max(1, (os.cpu_count() or 2) // 2))  # spinning workers cost more than they bring on shared cores
+
+    from holoflow.geometry.export import cameras_json, cameras_tensors, read_cameras, write_cameras, write_transforms
+    from holoflow.geometry.pointcloud import footprint_radius, project_points_zbuffer
+    from holoflow.geometry.rigs import SUPPLEMENTARY, supplementary_rig
+    from holoflow.io.exr import write_rgb
+    from holoflow.io.ply import read_points
+
+    p = job.params
+    offset, angle, radius = float(p["offset"]), float(p["angle_deg"]), int(p["splat_radius"])
+    if radius < 0:
+        raise ValueError(f"splat_radius must be >= 1, or 0 for automatic, got {radius}")
+    device = torch.device(job.device)
+    xyz, rgb8 = read_points(job.input_file("cloud", "ps.ply"))
+    if len(xyz) == 0:
+        raise ValueError("ps.ply holds no points")
+    base = read_cameras(job.input_file("cameras", "cameras.json"))
+    K, base_V = (t.to(device) for t in cameras_tensors(base))  # float64
+    W, H = int(base["width"]), int(base["height"])
+    pts = torch.from_numpy(xyz).to(device).double()  # [N, 3]
+    srgb = torch.from_numpy(rgb8).to(device).float() / 255.0  # [N, 3]
+    linear = kornia.color.rgb_to_linear_rgb(srgb.T[:, :, None])[:, :, 0].T  # [N, 3] linear light
+    M = base_V.shape[0]
+    spacing = 2.0 * math.pi / math.sqrt(2.0 * len(xyz))  # P_s's angular step, radians
+
+    def radii(viewmat):
+        return radius if radius > 0 else footprint_radius(pts, viewmat, K, spacing)
+
+    medians = []
+    for i in range(M):  # typical scene depth seen by each base camera
+        _, hit, z = project_points_zbuffer(pts, linear, K, base_V[i], H, W, radii(base_V[i]))
+        zs = z[hit > 0]
+        medians.append(float(zs.median()) if zs.numel() else float(torch.linalg.vector_norm(pts, dim=-1).median()))
+    medians_t = torch.tensor(medians, dtype=torch.float64, device=device)
+    sup = supplementary_rig(base_V, medians_t, offset, angle)  # [4 M, 4, 4]
+    names, files, bases, missing = [], [], [], []
+    for j in range(4 * M):
+        b, k = divmod(j, 4)
+        img, hit, _ = project_points_zbuffer(pts, linear, K, sup[j], H, W, radii(sup[j]))
+        name = f"{base['views'][b]['name']}_{k}"
+        names.append(name)
+        files.append(f"views/{name}.exr")
+        bases.append(b)
+        missing.append(1.0 - float(hit.mean()))
+        write_rgb(job.output(files[-1]), img.float().cpu().numpy(),
+                  {"holoflow.stage": "pcd_set", "holoflow.camera": name, "holoflow.side": SUPPLEMENTARY[k]},
+                  A=hit.float().cpu().numpy())
+        job.progress(j + 1, 4 * M, "views")
+    cams = cameras_json(K, sup, W, H, names, files, kinds=["supplementary"] * (4 * M), bases=bases)
+    write_cameras(job.output("cameras.json"), cams)
+    write_transforms(job.output("transforms.json"), cams)
+    job.meta(views=4 * M, points=int(len(xyz)), missing_fraction=round(sum(missing) / len(missing), 6),
+             splat_radius=radius if radius > 0 else "auto",
+             median_depth=[round(m, 4) for m in medians])
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except (ValueError, OSError) as exc:  # a user mistake ends in one line
+        sys.exit(f"pcd_set: {exc}")

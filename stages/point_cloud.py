@@ -1,0 +1,73 @@
+"""point_cloud: equirect RGB-D -> the three point clouds of HoloDreamer (p0.ply, pf.ply, ps.ply).
+
+P0 at ``p0_width`` (paper: the depth resolution, 4096); P_f at ``pf_width`` (paper 2048) with the
+points whose relative depth gradient exceeds ``grad_threshold`` (paper 0.4) dropped (definition and
+units: holoflow/geometry/pointcloud.py, docs/conventions.md); P_s at ``ps_width`` (paper 1024), the
+cloud the PCD set is projected from. Sky (inf depth) goes on a far shell of radius ``sky_radius``
+(0 = 2 x the 99th percentile of finite depth) so the scene stays enclosed. Colour is resampled
+antialiased, depth point-sampled (no invented edge depths). PLY colours are 8-bit sRGB
+(docs/conventions.md); pano.exr is linear.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+
+def main() -> int:
+    from holoflow.stage import Job
+
+    job = Job.from_argv()
+    import kornia
+    import torch
+
+    torch.set_num_threads(max(1, (os.cpu_count() or 2) // 2))  # spinning workers cost more than they bring on shared cores
+
+    from holoflow.geometry.pointcloud import (depth_gradient_mask, equirect_to_points, far_shell_radius,
+                                              resample_rgbd, sky_to_shell)
+    from holoflow.io.exr import read_exr, read_rgb
+    from holoflow.io.ply import write_points
+
+    p = job.params
+    widths = {name: int(p[f"{name}_width"]) for name in ("p0", "pf", "ps")}
+    if min(widths.values()) < 2:
+        raise ValueError(f"point cloud widths must be >= 2, got {widths}")
+    threshold, sky_radius = float(p["grad_threshold"]), float(p["sky_radius"])
+    rgb = torch.from_numpy(read_rgb(job.input_file("pano", "pano.exr")))  # [H, W, 3] linear
+    channels, attrs = read_exr(job.input_file("depth", "depth.exr"))
+    if "Z" not in channels:
+        raise ValueError(f"depth.exr has no Z channel (has {sorted(channels)})")
+    kind = attrs.get("holoflow.depth_kind", "radial")
+    if kind != "radial":
+        raise ValueError(f"depth.exr holds {kind} depth; point_cloud needs radial (equirect) depth")
+    depth = torch.from_numpy(channels["Z"]).double()  # [H, W] radial metres, inf = sky
+    sky_fraction = float((~(torch.isfinite(depth) & (depth > 0))).double().mean())
+    shell = sky_radius if sky_radius > 0 else far_shell_radius(depth)
+    # linear -> 8-bit sRGB, the PLY colour convention
+    srgb = kornia.color.linear_rgb_to_rgb(rgb.clamp(0, 1).permute(2, 0, 1)).permute(1, 2, 0)
+    counts = {}
+    for i, (name, width) in enumerate(widths.items()):
+        col, d = resample_rgbd(srgb, depth, width)
+        d = sky_to_shell(d, shell)
+        keep = torch.ones_like(d, dtype=torch.bool)
+        if name == "pf":
+            keep = depth_gradient_mask(d, threshold)
+            d = torch.where(keep, d, torch.full_like(d, float("nan")))
+        xyz, c = equirect_to_points(col, d)
+        rgb8 = (c.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).numpy()
+        write_points(job.output(f"{name}.ply"), xyz.float().numpy(), rgb8)
+        counts[name] = int(xyz.shape[0])
+        if name == "pf":
+            counts["pf_dropped_fraction"] = round(float((~keep).double().mean()), 6)
+        job.progress(i + 1, 3, "clouds")
+    job.meta(points=counts, sky_fraction=round(sky_fraction, 6), shell_radius=round(shell, 6),
+             grad_threshold=threshold, depth_size=list(depth.shape))
+    print(f"point_cloud: {counts}, shell radius {shell:.3f} m, sky {100 * sky_fraction:.2f}%")
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except (ValueError, OSError) as exc:  # a user mistake ends in one line
+        sys.exit(f"point_cloud: {exc}")

@@ -1,0 +1,117 @@
+"""point_cloud, pano_set and pcd_set run as processes (the step protocol) on a small synthetic RGB-D pano."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from holoflow.geometry.export import cameras_tensors, read_cameras, read_transforms
+from holoflow.io.exr import read_exr, write_exr, write_rgb
+from holoflow.io.ply import read_points
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(Path(__file__).parent))
+from test_geom_pointcloud import rgbd_pano  # noqa: E402  (the analytic room + ball scene)
+
+
+def run_stage(tmp: Path, stage: str, params: dict, inputs: dict) -> subprocess.CompletedProcess:
+    out = tmp / f"{stage}_out"
+    out.mkdir()
+    job = {"stage": stage, "engine": "default", "params": params, "seed": 0, "prompt": "",
+           "inputs": {k: str(v) for k, v in inputs.items()}, "output_dir": str(out),
+           "work_dir": str(tmp / f"{stage}_work"), "device": "cpu"}
+    (tmp / f"{stage}.json").write_text(json.dumps(job))
+    return subprocess.run([sys.executable, str(ROOT / "stages" / f"{stage}.py"), str(tmp / f"{stage}.json")],
+                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def rgbd_dir(tmp_path_factory):
+    """pano.exr (linear RGB) and depth.exr (radial Z, the top 8 rows are sky = inf), 128 x 64."""
+    d = tmp_path_factory.mktemp("rgbd")
+    rgb, depth = rgbd_pano(64, 128, torch.float64, "cpu")
+    depth[:8] = float("inf")
+    write_rgb(d / "pano.exr", rgb.numpy().astype(np.float32), {"holoflow.stage": "detail"})
+    write_exr(d / "depth.exr", {"Z": depth.numpy().astype(np.float32)}, {"holoflow.depth_kind": "radial"})
+    return d
+
+
+@pytest.fixture(scope="module")
+def stage_outputs(rgbd_dir, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("stages")
+    pc = run_stage(tmp, "point_cloud", {"p0_width": 128, "pf_width": 64, "ps_width": 64, "grad_threshold": 0.4,
+                                        "sky_radius": 0.0}, {"pano": rgbd_dir, "depth": rgbd_dir})
+    ps = run_stage(tmp, "pano_set", {"rig": "fibonacci", "cameras": 12, "size": 24, "fov_deg": 90.0},
+                   {"pano": rgbd_dir})
+    pcd = None
+    if pc.returncode == 0 and ps.returncode == 0:
+        pcd = run_stage(tmp, "pcd_set", {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0},
+                        {"cloud": tmp / "point_cloud_out", "cameras": tmp / "pano_set_out"})
+    return tmp, pc, ps, pcd
+
+
+def test_point_cloud_stage(stage_outputs):
+    tmp, pc, _, _ = stage_outputs
+    assert pc.returncode == 0, pc.stderr
+    out = tmp / "point_cloud_out"
+    xyz0, rgb0 = read_points(out / "p0.ply")
+    assert xyz0.shape == (128 * 64, 3) and rgb0.dtype == np.uint8  # sky kept, on the shell
+    r = np.linalg.norm(xyz0, axis=1).reshape(64, 128)
+    shell = r[:8]
+    assert np.allclose(shell, shell[0, 0], rtol=1e-5) and shell[0, 0] > r[8:].max()
+    meta = [json.loads(ln[6:]) for ln in pc.stdout.splitlines() if ln.startswith("@meta ")][0]
+    assert abs(meta["sky_fraction"] - 8 / 64) < 1e-6
+    xyzf, _ = read_points(out / "pf.ply")
+    assert 0 < len(xyzf) < 64 * 32 and len(xyzf) == meta["points"]["pf"]
+    xyzs, _ = read_points(out / "ps.ply")
+    assert len(xyzs) == 64 * 32
+
+
+def test_point_cloud_rejects_z_depth(rgbd_dir, tmp_path):
+    ch, _ = read_exr(rgbd_dir / "depth.exr")
+    write_exr(tmp_path / "depth.exr", ch, {"holoflow.depth_kind": "z"})
+    res = run_stage(tmp_path, "point_cloud", {"p0_width": 32, "pf_width": 16, "ps_width": 16, "grad_threshold": 0.4,
+                                              "sky_radius": 0.0}, {"pano": rgbd_dir, "depth": tmp_path})
+    assert res.returncode != 0 and "radial" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_pano_set_stage(stage_outputs, rgbd_dir):
+    tmp, _, ps, _ = stage_outputs
+    assert ps.returncode == 0, ps.stderr
+    out = tmp / "pano_set_out"
+    cams = read_cameras(out / "cameras.json")
+    assert len(cams["views"]) == 12 and cams["width"] == 24 and cams["cx"] == 12.0
+    assert all((out / v["file"]).exists() for v in cams["views"])
+    ch, attrs = read_exr(out / cams["views"][0]["file"])
+    assert set(ch) == {"R", "G", "B"} and attrs["holoflow.colorspace"] == "linear"
+    K, V = cameras_tensors(read_transforms(out / "transforms.json"))
+    torch.testing.assert_close(V, cameras_tensors(cams)[1], atol=1e-6, rtol=0)
+    meta = [json.loads(ln[6:]) for ln in ps.stdout.splitlines() if ln.startswith("@meta ")][0]
+    assert meta["unseen_fraction"] == 0.0
+    assert "warning" not in ps.stdout
+
+
+def test_pcd_set_stage(stage_outputs):
+    tmp, _, _, pcd = stage_outputs
+    assert pcd is not None and pcd.returncode == 0, pcd and pcd.stderr
+    out = tmp / "pcd_set_out"
+    cams = read_cameras(out / "cameras.json")
+    assert len(cams["views"]) == 48
+    assert {v["kind"] for v in cams["views"]} == {"supplementary"}
+    assert [v["base"] for v in cams["views"][:8]] == [0, 0, 0, 0, 1, 1, 1, 1]
+    assert cams["views"][5]["name"] == "001_1"
+    ch, _ = read_exr(out / cams["views"][0]["file"])
+    assert set(ch) == {"R", "G", "B", "A"} and set(np.unique(ch["A"])) <= {0.0, 1.0}
+    hits = np.mean([read_exr(out / v["file"])[0]["A"].mean() for v in cams["views"]])
+    assert hits > 0.9  # automatic splat radii: only disocclusions stay empty
+    meta = [json.loads(ln[6:]) for ln in pcd.stdout.splitlines() if ln.startswith("@meta ")][0]
+    # supplementary cameras sit offset x median depth away from the centre
+    _, V = cameras_tensors(cams)
+    from holoflow.geometry.camera import camera_centers
+
+    dist = torch.linalg.vector_norm(camera_centers(V), dim=-1).reshape(12, 4)
+    med = torch.tensor(meta["median_depth"], dtype=torch.float64)
+    torch.testing.assert_close(dist, 0.1 * med[:, None].expand(12, 4), atol=1e-3, rtol=1e-3)
