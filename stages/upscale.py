@@ -1,0 +1,51 @@
+"""upscale: panorama -> panorama at the stage's width x height (pano.exr, R,G,B linear).
+
+Engines: ``lanczos`` (default, offline): wrap-aware Lanczos-3 through OpenImageIO
+(holoflow.imageops.resize). ``realesrgan``: Real-ESRGAN (RRDBNet), tiled, wrap-padded at the seam
+(holoflow.engines.realesrgan).
+"""
+from __future__ import annotations
+
+import sys
+
+
+def main() -> int:
+    from holoflow.stage import Job
+
+    job = Job.from_argv()
+    from holoflow.io.exr import read_rgb, write_rgb
+
+    p = job.params
+    width, height = int(p["width"]), int(p["height"])
+    if width < 1 or height < 1:
+        raise ValueError(f"width and height must be >= 1, got {width}x{height}")
+    pano = read_rgb(job.input_file("pano", "pano.exr"))                               # [H, W, 3] linear
+    if job.engine == "lanczos":
+        from holoflow.imageops.resize import lanczos_resize
+
+        out = lanczos_resize(pano, width, height)
+        job.meta(engine=job.engine, scale=round(width / pano.shape[1], 4))
+    elif job.engine == "realesrgan":
+        from holoflow.engines.realesrgan import upscale
+
+        out = upscale(pano, width, height, str(p.get("model", "")), int(p["tile"]), job.device, job.progress)
+        job.meta(engine=job.engine, model=str(p.get("model", "")) or "default")
+    else:
+        raise ValueError(f"unknown engine {job.engine!r} (lanczos | realesrgan)")
+    write_rgb(job.output("pano.exr"), out, {"holoflow.stage": "upscale", "holoflow.engine": job.engine})
+    return 0
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    from holoflow.engines.weights import MissingWeights
+
+    return (ValueError, OSError, ImportError, MissingWeights)
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except Exception as exc:  # a user mistake ends in one line; anything else keeps its traceback
+        if isinstance(exc, _user_errors()):
+            sys.exit(f"upscale: {exc}")
+        raise
