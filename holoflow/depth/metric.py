@@ -1,0 +1,59 @@
+"""Metric alignment: one global scale and offset mapping the blended disparity to metric disparity.
+
+References are metric depths on a few tangent faces, converted to radial disparity y = 1 / r. The
+blended relative disparity x at the same directions is fitted as y ~ a * x + b by iteratively
+reweighted least squares on *relative* residuals (a x + b - y) / y, with Huber weights, so that
+near and far pixels count alike and outliers (edge mixing, a metric network's sky) are down-weighted;
+a last plain least-squares pass on the inliers (|residual| <= 3 huber) removes the Huber bias.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def robust_affine_fit(x: np.ndarray, y: np.ndarray, huber: float = 0.05, iters: int = 20) -> dict:
+    """Fit y ~ a x + b (x, y [N], y > 0 finite) by Huber IRLS on relative residuals.
+
+    ``huber`` is the Huber threshold on the relative residual. Returns ``scale`` a, ``offset`` b,
+    ``n``, ``rel_rms`` / ``rel_median_abs`` (final relative residuals), ``inlier_frac`` (|res| <= huber),
+    ``iters``. Raises ValueError when fewer than 2 usable pairs or x has no spread.
+    """
+    x = np.asarray(x, dtype=np.float64).ravel()
+    y = np.asarray(y, dtype=np.float64).ravel()
+    keep = np.isfinite(x) & np.isfinite(y) & (y > 0)
+    x, y = x[keep], y[keep]
+    if x.size < 2:
+        raise ValueError(f"metric alignment: {x.size} usable reference pixels (need >= 2); "
+                         "the metric faces may be all sky or invalid")
+    if not np.ptp(x) > 1e-12 * max(np.abs(x).max(), 1e-30):
+        raise ValueError("metric alignment: the blended disparity is constant over the reference pixels; "
+                         "scale and offset are not determined")
+    A = np.stack([x / y, 1.0 / y], 1)  # rows of the relative residual: A @ [a, b] - 1
+    w = np.ones(x.size)
+    coef = np.zeros(2)
+    done = 0
+    for done in range(1, iters + 1):
+        sw = np.sqrt(w)
+        new, *_ = np.linalg.lstsq(A * sw[:, None], sw, rcond=None)
+        r = A @ new - 1.0
+        w = np.where(np.abs(r) <= huber, 1.0, huber / np.maximum(np.abs(r), 1e-300))
+        converged = np.allclose(new, coef, rtol=1e-9, atol=0)
+        coef = new
+        if converged:
+            break
+    r = A @ coef - 1.0
+    keep = np.abs(r) <= 3 * huber  # last pass: plain least squares on the inliers (trimmed)
+    if keep.sum() >= 2 and np.ptp(x[keep]) > 0:
+        coef, *_ = np.linalg.lstsq(A[keep], np.ones(int(keep.sum())), rcond=None)
+        r = A @ coef - 1.0
+    return {"scale": float(coef[0]), "offset": float(coef[1]), "n": int(x.size),
+            "rel_rms": float(np.sqrt(np.mean(r ** 2))), "rel_median_abs": float(np.median(np.abs(r))),
+            "inlier_frac": float(np.mean(np.abs(r) <= huber)), "iters": done}
+
+
+def disparity_to_depth(disparity: np.ndarray, scale: float, offset: float, max_depth: float) -> np.ndarray:
+    """Radial depth (metres) = 1 / (scale * disparity + offset); +inf where that metric disparity is
+    below 1 / ``max_depth`` (sky, unbounded) or the input is not finite."""
+    metric = scale * np.asarray(disparity, dtype=np.float64) + offset
+    far = ~(np.isfinite(metric) & (metric >= 1.0 / max_depth))
+    return np.where(far, np.inf, 1.0 / np.where(far, 1.0, metric))

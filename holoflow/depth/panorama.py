@@ -1,0 +1,209 @@
+"""Panorama depth, 360MonoDepth style: tangent faces -> relative disparity -> alignment -> frustum
+blending -> one global metric scale and offset. The two stages (tangent_depth, metric_align) and the
+bench call these functions; docs/depth.md explains the method.
+
+Arrays: panoramas are numpy [H, W, 3] linear RGB; radial depth [H, W] metres (+inf sky); disparity
+[H, W] relative radial disparity (~ 1/r up to a global affine map). Faces: holoflow.geometry.icosahedron.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from holoflow.depth.align import Alignment, align_faces
+from holoflow.depth.engines import metric_depth, relative_disparity
+from holoflow.depth.faces import face_rays, find_overlaps
+from holoflow.depth.metric import disparity_to_depth, robust_affine_fit
+from holoflow.depth.metrics import depth_metrics
+
+
+@dataclass
+class TangentDepth:
+    """``disparity`` [H, W] blended radial disparity; ``raw`` / ``aligned`` [F, h, w] per-face engine
+    output and aligned radial disparity (NaN invalid); ``alignment``; ``engine`` facts."""
+
+    disparity: np.ndarray
+    raw: np.ndarray
+    aligned: np.ndarray
+    alignment: Alignment
+    engine: dict
+
+
+def icosahedron_faces(face_size: int, padding: float):
+    """The 20 padded icosahedron tangent faces (holoflow.geometry.icosahedron)."""
+    from holoflow.geometry.icosahedron import tangent_faces
+
+    if face_size < 2:
+        raise ValueError(f"face_size must be >= 2 pixels, got {face_size}")
+    return tangent_faces(padding=padding, size=face_size)
+
+
+def resize_pano(pano: np.ndarray, width: int) -> np.ndarray:
+    """Linear RGB panorama [H, W, 3] resized (wrap-aware, antialiased) to width x width / 2."""
+    import torch
+
+    from holoflow.geometry.sampling import resize_equirect
+
+    H, W = pano.shape[:2]
+    height = max(1, width // 2)
+    if (H, W) == (height, width):
+        return np.asarray(pano, dtype=np.float32)
+    t = torch.from_numpy(np.ascontiguousarray(pano, dtype=np.float32)).permute(2, 0, 1)
+    return resize_equirect(t, height, width).permute(1, 2, 0).numpy()
+
+
+def resize_radial(radial: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Radial depth [H, W] -> [height, width] by the nearest source pixel (no mixing across edges or
+    with sky)."""
+    H, W = radial.shape
+    rows = np.minimum(((np.arange(height) + 0.5) * H / height).astype(np.int64), H - 1)
+    cols = np.minimum(((np.arange(width) + 0.5) * W / width).astype(np.int64), W - 1)
+    return radial[rows[:, None], cols[None, :]]
+
+
+def sample_faces(pano: np.ndarray, K, viewmat, size: int, mode: str = "bilinear") -> np.ndarray:
+    """Perspective faces [F, size, size, C] of an equirect image [H, W, C] (or [H, W])."""
+    import torch
+
+    from holoflow.geometry.sampling import equirect_to_pinhole
+
+    img = np.asarray(pano, dtype=np.float64)
+    img = img[..., None] if img.ndim == 2 else img
+    t = torch.from_numpy(np.ascontiguousarray(img)).permute(2, 0, 1)
+    out = equirect_to_pinhole(t, _t(K), _t(viewmat), size, size, mode=mode)  # [F, C, s, s]
+    return out.permute(0, 2, 3, 1).numpy()
+
+
+def sample_radial(radial: np.ndarray, K, viewmat, size: int) -> np.ndarray:
+    """True radial depth [F, size, size] in the faces: nearest pixel, sky stays +inf."""
+    disp = np.where(np.isfinite(radial) & (radial > 0), 1.0 / np.where(radial > 0, radial, 1.0), 0.0)
+    d = sample_faces(disp, K, viewmat, size, mode="nearest")[..., 0]
+    return np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.inf)
+
+
+def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, face_size: int = 256,
+                       padding: float = 0.3, method: str = "grid", grid=(8, 7), smoothness: float = 1.0,
+                       scale_reg: float = 0.1, seed: int = 0, model: str = "", device: str = "cpu",
+                       progress: Callable[[int, int], None] | None = None) -> TangentDepth:
+    """Relative radial disparity [H, W] of a panorama [H, W, 3] (see the module docstring).
+
+    ``truth`` [H, W] radial depth (needed by the ``simulated`` engine only).
+    """
+    H, W = pano.shape[:2]
+    faces = icosahedron_faces(face_size, padding)
+    K, V = _np(faces.K), _np(faces.viewmat)
+    images = sample_faces(pano, K, V, face_size).astype(np.float32)  # [F, h, w, 3]
+    dirs, cos = face_rays(K, V, face_size, face_size)
+    truth_faces = sample_radial(truth, K, V, face_size) if truth is not None else None
+    raw, meta = relative_disparity(engine, images, dirs, cos, truth_faces, seed, model, device, progress)
+    raw = np.asarray(raw, dtype=np.float64)
+    if raw.shape != cos.shape:
+        raise ValueError(f"depth engine {engine!r} returned {raw.shape}, expected {cos.shape}")
+    overlaps = find_overlaps(K, V, face_size, face_size, stride=max(1, face_size // 64))
+    al = align_faces(raw, np.isfinite(raw), cos, overlaps, method, tuple(grid), smoothness, scale_reg)
+    from holoflow.geometry.icosahedron import frustum_weight
+
+    disparity = blend_faces(al.radial, _np(frustum_weight(faces)), K, V, H, W)
+    return TangentDepth(disparity.astype(np.float32), raw.astype(np.float32), al.radial.astype(np.float32),
+                        al, meta)
+
+
+def blend_faces(radial: np.ndarray, weights: np.ndarray, K, viewmat, H: int, W: int) -> np.ndarray:
+    """Frustum blending: per-face radial disparity [F, h, w] (NaN = invalid) -> equirect [H, W].
+
+    ``weights`` [F, h, w] frustum weights; invalid pixels get weight 0 (and their neighbours' values, so
+    bilinear taps at a face's valid border do not mix in a fill value). Equirect pixels no valid face
+    covers take the nearest covered pixel (wrap-aware). Raises ValueError when no face is valid.
+    """
+    import scipy.ndimage as ndi
+    import torch
+
+    from holoflow.geometry.sampling import pinhole_to_equirect
+
+    radial = np.asarray(radial, dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64).reshape(radial.shape)
+    ok = np.isfinite(radial)
+    if not ok.any():
+        raise ValueError("no tangent face has a valid disparity (all sky, NaN or dropped); nothing to blend")
+    filled = np.zeros_like(radial)
+    for f in range(radial.shape[0]):
+        if ok[f].any():
+            idx = ndi.distance_transform_edt(~ok[f], return_distances=False, return_indices=True)
+            filled[f] = radial[f][tuple(idx)]
+    wt = np.where(ok, weights, 0.0)
+    accum, wsum = pinhole_to_equirect(torch.from_numpy(filled[:, None]), _t(K), _t(viewmat), H, W,
+                                      weights=torch.from_numpy(wt[:, None]))
+    accum, wsum = accum[0].numpy(), wsum[0].numpy()
+    covered = wsum > 1e-12
+    out = np.where(covered, accum / np.where(covered, wsum, 1.0), np.nan)
+    if not covered.all():
+        if not covered.any():
+            raise ValueError("the valid faces cover no panorama pixel; nothing to blend")
+        tiled = np.concatenate([out, out, out], axis=1)  # wrap-aware nearest fill
+        idx = ndi.distance_transform_edt(np.isnan(tiled), return_distances=False, return_indices=True)
+        out = tiled[tuple(idx)][:, W:2 * W]
+    return out
+
+
+@dataclass
+class MetricDepth:
+    """``depth`` [H, W] radial metres (+inf sky); ``fit`` (scale, offset, residuals); ``faces`` used;
+    ``engine`` facts."""
+
+    depth: np.ndarray
+    fit: dict
+    faces: list[int]
+    engine: dict
+
+
+def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.ndarray | None, engine: str,
+                          n_faces: int = 6, face_size: int = 256, padding: float = 0.3, seed: int = 0,
+                          max_depth: float = 3000.0, huber: float = 0.05, model: str = "",
+                          device: str = "cpu", progress=None) -> MetricDepth:
+    """Metric radial depth from a relative disparity [H, W] and metric depth on a seeded face subset."""
+    if not 1 <= n_faces <= 20:
+        raise ValueError(f"metric_align faces must be in 1..20, got {n_faces}")
+    if max_depth <= 0:
+        raise ValueError(f"max_depth must be > 0, got {max_depth}")
+    faces = icosahedron_faces(face_size, padding)
+    chosen = sorted(int(i) for i in np.random.default_rng([seed, 1]).choice(20, n_faces, replace=False))
+    K, V = _np(faces.K)[chosen], _np(faces.viewmat)[chosen]
+    images = sample_faces(pano, K, V, face_size).astype(np.float32)
+    dirs, cos = face_rays(K, V, face_size, face_size)
+    truth_faces = sample_radial(truth, K, V, face_size) if truth is not None else None
+    z, meta = metric_depth(engine, images, dirs, cos, truth_faces, [seed, 2], model, device, progress)
+    z = np.asarray(z, dtype=np.float64)
+    ref = np.where(np.isfinite(z) & (z > 0), cos / np.where(z > 0, z, 1.0), np.nan)  # radial disparity
+    x = sample_faces(disparity, K, V, face_size)[..., 0]
+    fit = robust_affine_fit(x, ref, huber=huber)
+    if not fit["scale"] > 0:
+        raise ValueError(f"metric alignment gave a non-positive scale ({fit['scale']:.3g}): the relative "
+                         "disparity does not grow with the reference disparity (wrong engine output?)")
+    depth = disparity_to_depth(disparity, fit["scale"], fit["offset"], max_depth)
+    return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
+
+
+def oracle_metrics(disparity: np.ndarray, truth: np.ndarray, max_depth: float = 3000.0) -> dict:
+    """Scores of a relative disparity after the best global scale + offset fitted against the truth itself
+    (an upper bound for metric_align; measures the tangent alignment alone)."""
+    truth = resize_radial(truth, *disparity.shape)
+    ref = np.where(np.isfinite(truth) & (truth > 0), 1.0 / np.where(truth > 0, truth, 1.0), np.nan)
+    fit = robust_affine_fit(disparity, ref)
+    return depth_metrics(disparity_to_depth(disparity, fit["scale"], fit["offset"], max_depth), truth)
+
+
+def score(depth: np.ndarray, truth: np.ndarray) -> dict:
+    """depth_metrics of a radial depth [H, W] against a truth of any size (nearest-resized)."""
+    return depth_metrics(depth, resize_radial(truth, *depth.shape))
+
+
+def _np(x) -> np.ndarray:
+    return x.detach().cpu().numpy().astype(np.float64) if hasattr(x, "detach") else np.asarray(x, np.float64)
+
+
+def _t(x):
+    import torch
+
+    return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64))

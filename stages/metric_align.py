@@ -1,0 +1,52 @@
+"""metric_align: metric depth (engine) on a seeded random subset of ``faces`` tangent faces, turned
+into radial disparity references; one global scale + offset maps the blended disparity onto them
+(Huber IRLS on relative residuals). Writes depth.exr (Z = radial metres, +inf sky) and
+metric_align.json (scale, offset, residuals, faces used); with a truth depth it records AbsRel,
+RMSE and delta1 of the result (docs/depth.md)."""
+from __future__ import annotations
+
+import json
+import sys
+
+
+def main() -> int:
+    from holoflow.stage import Job
+
+    job = Job.from_argv()
+    from holoflow.depth import panorama as pd
+    from holoflow.depth.io import read_disparity, read_pano, read_truth
+    from holoflow.io.exr import write_exr
+
+    p = job.params
+    disparity = read_disparity(job.input_file("disparity", "disparity.exr"))
+    pano = pd.resize_pano(read_pano(job.input_file("pano", "pano.exr")), disparity.shape[1])
+    truth = read_truth(job.inputs.get("truth"))
+    result = pd.metric_from_disparity(
+        disparity, pano, truth, job.engine, n_faces=int(p["faces"]), face_size=int(p["face_size"]),
+        padding=float(p.get("padding", 0.3)), seed=job.seed, max_depth=float(p.get("max_depth", 3000.0)),
+        huber=float(p.get("huber", 0.05)), model=str(p.get("model", "")), device=job.device,
+        progress=lambda d, n: job.progress(d, n, "faces"))
+    write_exr(job.output("depth.exr"), {"Z": result.depth},
+              {"holoflow.stage": "metric_align", "holoflow.depth_kind": "radial", "holoflow.engine": job.engine,
+               "holoflow.simulation": int(bool(result.engine.get("simulation")))})
+    report = {"engine": result.engine, "faces": result.faces, **result.fit}
+    if truth is not None:
+        report["truth_metrics"] = pd.score(result.depth, truth)
+    job.output("metric_align.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
+    job.meta(**report)
+    return 0
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    from holoflow.engines.weights import MissingWeights
+
+    return (ValueError, OSError, ImportError, MissingWeights)
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except Exception as exc:  # a user mistake ends in one line; anything else keeps its traceback
+        if isinstance(exc, _user_errors()):
+            sys.exit(f"metric_align: {exc}")
+        raise

@@ -1,0 +1,63 @@
+"""tangent_depth: the panorama (downsampled to ``width``) -> 20 padded icosahedron tangent faces ->
+relative disparity per face (engine) -> per-face alignment (``align``: median | affine | grid) ->
+frustum blending. Writes disparity.exr (Y = relative radial disparity), faces/face_NN.exr (raw.Y =
+engine output, aligned.Y = aligned radial disparity) and alignment.json (residuals, node grids).
+With a truth depth (Z in the truth panorama) it records how well the disparity can score after the
+best global scale + offset (docs/depth.md)."""
+from __future__ import annotations
+
+import json
+import sys
+
+
+def main() -> int:
+    from holoflow.stage import Job
+
+    job = Job.from_argv()
+    import numpy as np
+
+    from holoflow.depth import panorama as pd
+    from holoflow.depth.io import read_pano, read_truth
+    from holoflow.io.exr import write_exr
+
+    p = job.params
+    pano = pd.resize_pano(read_pano(job.input_file("pano", "pano.exr")), int(p["width"]))
+    truth = read_truth(job.inputs.get("truth"))
+    result = pd.estimate_disparity(
+        pano, truth, job.engine, face_size=int(p["face_size"]), padding=float(p["padding"]),
+        method=str(p.get("align", "grid")), grid=tuple(p["grid"]), smoothness=float(p["smoothness"]),
+        scale_reg=float(p["scale_reg"]), seed=job.seed, model=str(p.get("model", "")), device=job.device,
+        progress=lambda d, n: job.progress(d, n, "faces"))
+    attrs = {"holoflow.stage": "tangent_depth", "holoflow.depth_kind": "disparity",
+             "holoflow.engine": job.engine, "holoflow.simulation": int(bool(result.engine.get("simulation")))}
+    write_exr(job.output("disparity.exr"), {"Y": result.disparity}, attrs)
+    for f in range(result.raw.shape[0]):
+        write_exr(job.output(f"faces/face_{f:02d}.exr"),
+                  {"raw.Y": result.raw[f], "aligned.Y": result.aligned[f]},
+                  {**attrs, "holoflow.face": f, "holoflow.face_ok": int(result.alignment.face_ok[f])})
+    al = result.alignment
+    report = {"engine": result.engine, "residuals": al.residuals, "norm": al.norm.tolist(),
+              "face_ok": al.face_ok.astype(int).tolist(),
+              "scale_grid": np.round(al.scale, 8).tolist(), "offset_grid": np.round(al.offset, 8).tolist()}
+    job.output("alignment.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
+    meta = {"engine": result.engine, "align": al.residuals["method"], "overlap_rel_rms": al.residuals["rel_rms"],
+            "dropped_faces": al.residuals["dropped_faces"]}
+    if truth is not None:
+        meta["truth_oracle_affine"] = pd.oracle_metrics(result.disparity, truth)
+    job.meta(**meta)
+    return 0
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    from holoflow.engines.weights import MissingWeights
+
+    return (ValueError, OSError, ImportError, MissingWeights)
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except Exception as exc:  # a user mistake ends in one line; anything else keeps its traceback
+        if isinstance(exc, _user_errors()):
+            sys.exit(f"tangent_depth: {exc}")
+        raise
