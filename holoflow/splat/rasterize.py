@@ -1,0 +1,131 @@
+"""``rasterize``: one contract, three backends (dense torch reference, fast CPU, gsplat CUDA)."""
+from __future__ import annotations
+
+import torch
+
+from holoflow.splat.project import eval_sh, pixel_extent, project_gaussians
+
+BACKENDS = ("auto", "reference", "cpu", "gsplat")
+
+
+def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
+              opacities: torch.Tensor, colors: torch.Tensor, viewmats: torch.Tensor,
+              Ks: torch.Tensor, width: int, height: int, near: float = 0.01, far: float = 1e10,
+              background: torch.Tensor | None = None, backend: str = "auto",
+              sh_degree: int | None = None) -> dict:
+    """Render activated Gaussians into C pinhole cameras.
+
+    means [N, 3] world metres; quats [N, 4] (w, x, y, z), normalised inside (zero -> identity);
+    scales [N, 3] metres, positive; opacities [N] in (0, 1); colors [N, D] (used as is) or SH
+    coefficients [N, K, 3] evaluated per view (degree ``sh_degree``, default sqrt(K) - 1, + 0.5 and
+    clamped at 0 as in 3DGS); viewmats [C, 4, 4] world-to-camera (OpenCV axes); Ks [C, 3, 3] with pixel
+    centres at +0.5; background [D] or [C, D] added as (1 - alpha) * background.
+    backend: "reference" (dense torch), "cpu" (tiles + numba), "gsplat" (CUDA), "auto" (gsplat for
+    CUDA tensors, else cpu).
+    Returns dict(rgb [C, H, W, D], alpha [C, H, W, 1], depth [C, H, W, 1] = sum_i w_i z_i (accumulated
+    camera z, metres; divide by alpha for the expected depth), meta = dict(means2d [C, N, 2] (keeps its
+    gradient for densification statistics), radii [C, N] int (0 = not drawn), depths [C, N]))."""
+    if backend not in BACKENDS:
+        raise ValueError(f"rasterize: unknown backend {backend!r}, expected one of {BACKENDS}")
+    _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, width, height)
+    if backend == "auto":
+        backend = "gsplat" if means.is_cuda else "cpu"
+    if backend == "gsplat":
+        return _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height,
+                                 near, far, background, sh_degree)
+    if backend == "cpu" and means.device.type != "cpu":
+        raise ValueError(f"rasterize: backend 'cpu' needs CPU tensors, got {means.device}")
+    C, N = viewmats.shape[0], means.shape[0]
+    ops = opacities[None].expand(C, N)
+    if backend == "cpu":
+        from holoflow.splat.cpu_project import project_cpu
+
+        proj = project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, near, far)
+        ext = proj["ext"]
+    else:
+        proj = project_gaussians(means, quats, scales, viewmats, Ks, width, height, near, far)
+        ext = pixel_extent(proj["cov2d"].detach(), ops.detach())                      # [C, N, 2]
+    if colors.dim() == 3:
+        campos = -torch.einsum("cji,cj->ci", viewmats[:, :3, :3], viewmats[:, :3, 3])   # [C, 3]
+        d = means[None] - campos[:, None]                                             # [C, N, 3]
+        d = d / torch.sqrt((d * d).sum(-1, keepdim=True).clamp_min(1e-24))
+        rgb = eval_sh(colors[None].expand(C, -1, -1, -1), d, sh_degree)               # [C, N, 3]
+    else:
+        rgb = colors[None].expand(C, -1, -1)                                           # [C, N, D]
+    D = rgb.shape[-1]
+    depths = proj["depths"]
+    feats = torch.cat([rgb, depths[..., None], torch.ones_like(depths[..., None])], -1)  # [C, N, D+2]
+    if backend == "reference":
+        from holoflow.splat.reference import composite_dense
+
+        out = composite_dense(proj["means2d"], proj["conics"], ops, feats, depths, proj["valid"],
+                              width, height)
+    else:
+        from holoflow.splat.cpu import composite_cpu
+
+        out, _ = composite_cpu(proj["means2d"], proj["conics"], ops, feats, depths, proj["valid"],
+                               ext, width, height)
+    m2 = proj["means2d"].detach()
+    on_screen = ((m2 + ext >= 0) & (m2 - ext <= m2.new_tensor([width, height]))).all(-1)
+    radii = torch.where(proj["valid"] & on_screen & (ops.detach() >= 1 / 255),
+                        ext.max(-1).values.ceil(), torch.zeros_like(ext[..., 0])).to(torch.int32)
+    alpha = out[..., D + 1:]
+    color = out[..., :D]
+    if background is not None:
+        color = color + (1 - alpha) * background.to(color).reshape(-1, 1, 1, D)
+    return dict(rgb=color, alpha=alpha, depth=out[..., D:D + 1],
+                meta=dict(means2d=proj["means2d"], radii=radii, depths=depths, backend=backend))
+
+
+def render(model, viewmats: torch.Tensor, Ks: torch.Tensor, width: int, height: int,
+           backend: str = "auto", background: torch.Tensor | None = None,
+           sh_degree: int | None = None, **kwargs) -> dict:
+    """Render a ``GaussianModel`` (activations applied: exp scales, sigmoid opacity, SH colour up to
+    ``sh_degree``, default the model's). Other keyword arguments go to ``rasterize``."""
+    return rasterize(model.means, model.quats, torch.exp(model.log_scales),
+                     torch.sigmoid(model.opacity_logits), model.sh, viewmats, Ks, width, height,
+                     background=background, backend=backend,
+                     sh_degree=model.sh_degree if sh_degree is None else sh_degree, **kwargs)
+
+
+def _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, width, height):
+    N = means.shape[0]
+    want = {"means": (means, (N, 3)), "quats": (quats, (N, 4)), "scales": (scales, (N, 3)),
+            "opacities": (opacities, (N,))}
+    for name, (t, shape) in want.items():
+        if tuple(t.shape) != shape:
+            raise ValueError(f"rasterize: {name} has shape {tuple(t.shape)}, expected {shape}")
+    if colors.shape[0] != N or colors.dim() not in (2, 3) or (colors.dim() == 3 and colors.shape[-1] != 3):
+        raise ValueError(f"rasterize: colors must be [N, D] or SH [N, K, 3], got {tuple(colors.shape)}")
+    C = viewmats.shape[0]
+    if tuple(viewmats.shape) != (C, 4, 4) or tuple(Ks.shape) != (C, 3, 3):
+        raise ValueError(f"rasterize: viewmats {tuple(viewmats.shape)} / Ks {tuple(Ks.shape)} must be "
+                         "[C, 4, 4] / [C, 3, 3]")
+    if width < 1 or height < 1:
+        raise ValueError(f"rasterize: image size {width}x{height} must be at least 1x1")
+
+
+def _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near,
+                      far, background, sh_degree):
+    try:
+        from gsplat import rasterization
+    except ImportError as exc:
+        raise RuntimeError("rasterize: backend 'gsplat' needs the optional extra `cuda` "
+                           "(pip install gsplat) and a CUDA device") from exc
+    sh = colors.dim() == 3
+    if sh and sh_degree is None:
+        sh_degree = int(round(colors.shape[1] ** 0.5)) - 1
+    rc, ra, meta = rasterization(means, quats, scales, opacities, colors, viewmats, Ks, width, height,
+                                 near_plane=near, far_plane=far, eps2d=0.3,
+                                 sh_degree=sh_degree if sh else None, packed=False,
+                                 render_mode="RGB+D", rasterize_mode="classic",
+                                 camera_model="pinhole")
+    color, depth = rc[..., :-1], rc[..., -1:]
+    if background is not None:
+        color = color + (1 - ra) * background.to(color).reshape(-1, 1, 1, color.shape[-1])
+    radii = meta["radii"]
+    if radii.dim() == 3:                                  # gsplat >= 1.5: per-axis radii [C, N, 2]
+        radii = radii.max(-1).values
+    return dict(rgb=color, alpha=ra, depth=depth,
+                meta=dict(means2d=meta["means2d"], radii=radii.to(torch.int32), depths=meta["depths"],
+                          backend="gsplat"))
