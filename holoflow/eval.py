@@ -1,0 +1,265 @@
+"""``holoflow eval``: score the two-stage reconstruction on procedural scenes, where truth is exact.
+
+For each prompt (a procedural scene) and each variant (the full method and the paper's ablations) it
+runs the pipeline in an evaluation profile (appearance stages neutral, so the panorama is the scene's
+true appearance up to resampling) and scores G0 (pre_opt) and G1 (transfer_opt):
+
+- ``base``: PSNR / SSIM at the base cameras against the PANO set (the paper's protocol);
+- ``supp``: PSNR / SSIM at the supplementary cameras against true renders of the scene;
+- ``novel``: PSNR / SSIM at seeded random cameras off the centre against true renders;
+- ``empty``: fraction of pixels with rendered alpha < 0.5 at the supplementary and novel cameras;
+- LPIPS / NIQE / BRISQUE: computed only where their weights / parameters exist locally, otherwise
+  reported as unavailable (never approximated).
+
+Images are compared in sRGB [0, 1] (the space Gaussians are trained in, holoflow.recon.views).
+Variants: ``full``; ``no_depth_filter`` (point_cloud.grad_threshold = 1e6: no point is dropped; the store's canonical JSON has no infinity); ``no_pcd_phase``
+(pre_opt.pcd_iters = 0); ``no_inp`` (transfer_opt.use_inp = false: transfer on the PANO set only).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+PROMPTS = ["a cozy wooden cabin at night", "a sunny beach with palm trees",
+           "a modern living room with a sofa and a lamp", "a stone courtyard with a fountain"]
+VARIANTS = {
+    "full": [],
+    "no_depth_filter": ["point_cloud.grad_threshold=1000000.0"],
+    "no_pcd_phase": ["pre_opt.pcd_iters=0"],
+    "no_inp": ["transfer_opt.use_inp=false"],
+}
+MAX_OFFSET_M = 1.0      # novel cameras: at most this far from the centre (metres)
+
+
+def novel_cameras(scene, n: int, offset: float, seed: int) -> "torch.Tensor":
+    """n seeded random cameras off the centre, viewmats [n, 4, 4].
+
+    Each eye lies along a random direction u at a uniform random fraction in [0, offset] of the free
+    distance from the centre to the first surface along u (capped at MAX_OFFSET_M), so it is inside
+    the scene's free space; each looks along an independent direction uniform on the sphere."""
+    import torch
+
+    from holoflow.geometry.camera import look_at
+    from holoflow.scene import cast
+
+    g = torch.Generator().manual_seed(seed)
+    u = torch.nn.functional.normalize(torch.randn(n, 3, generator=g, dtype=torch.float64), dim=1)
+    look = torch.nn.functional.normalize(torch.randn(n, 3, generator=g, dtype=torch.float64), dim=1)
+    frac = torch.rand(n, generator=g, dtype=torch.float64) * offset
+    free = cast(scene, torch.zeros(n, 3), u.float())[1].double()                 # [n] metres (inf = sky)
+    dist = torch.minimum(frac * torch.nan_to_num(free, posinf=1e9), torch.full_like(frac, MAX_OFFSET_M))
+    eyes = u * dist[:, None]                                                     # [n, 3]
+    return look_at(eyes, eyes + look).float()
+
+
+def true_views(scene, viewmats, K, width: int, height: int, samples: int = 2,
+               cache: dict | None = None) -> "torch.Tensor":
+    """True sRGB renders [C, H, W, 3] of the procedural scene at pinhole cameras (``samples`` per
+    pixel side, antialiased like the base panorama). ``cache`` maps camera bytes -> render, so
+    variants that share cameras ray-cast each view once."""
+    import torch
+
+    from holoflow.recon.views import linear_to_srgb
+    from holoflow.scene import render_pinhole
+
+    cache = {} if cache is None else cache
+    out = []
+    for vm in viewmats:
+        key = (scene.prompt, scene.seed, vm.numpy().tobytes(), K.numpy().tobytes(), width, height, samples)
+        if key not in cache:
+            cache[key] = torch.from_numpy(render_pinhole(scene, K.numpy(), vm.numpy(), width, height,
+                                                         samples=samples)[0])
+        out.append(cache[key])
+    return linear_to_srgb(torch.stack(out))
+
+
+def score(model, viewmats, K, targets, backend: str, iqa_dir=None) -> tuple[dict, "torch.Tensor"]:
+    """PSNR / SSIM / empty fraction (and BRISQUE where available) of ``model`` rendered at the cameras
+    against targets [C, H, W, 3] sRGB. Returns (scores, renders [C, H, W, 3])."""
+    from holoflow import metrics
+    from holoflow.recon.schedule import render_views
+
+    views = [dict(image=t, viewmat=vm, K=K) for t, vm in zip(targets, viewmats)]
+    rgb, alpha = render_views(model, views, backend)
+    out = dict(psnr=metrics.psnr(rgb, targets), ssim=metrics.ssim(rgb, targets),
+               empty=metrics.empty_fraction(alpha))
+    if metrics.availability(iqa_dir)["brisque"] == "available":
+        out["brisque"] = sum(metrics.brisque(x, iqa_dir) for x in rgb) / len(rgb)
+    return out, rgb
+
+
+def evaluate_run(run_dir: Path, novel: int, offset: float, supp: int, seed: int, backend: str,
+                 iqa_dir=None, cache: dict | None = None) -> dict:
+    """Scores of G0 and G1 of one pipeline run (folder runs/<id>/ with one folder per stage):
+    ``novel`` random cameras, a seeded subset of ``supp`` supplementary cameras (0 = all)."""
+    import torch
+
+    from holoflow.recon.views import intrinsics, load_view_set, read_cameras
+    from holoflow.scene.model import Scene
+    from holoflow.splat import GaussianModel
+
+    scene_file = run_dir / "base_pano" / "scene.json"
+    if not scene_file.is_file():
+        raise SystemExit(f"eval: {scene_file} missing: eval needs the procedural base_pano engine (truth)")
+    scene = Scene.from_json(scene_file.read_text())
+    pano_views, cams = load_view_set(run_dir / "pano_set", alpha_is_mask=False)
+    K, w, h = intrinsics(cams), int(cams["width"]), int(cams["height"])
+    base_vm = torch.stack([v["viewmat"] for v in pano_views])
+    base_tgt = torch.stack([v["image"] for v in pano_views])
+    supp_vm = torch.stack([torch.tensor(v["viewmat"], dtype=torch.float32).reshape(4, 4)
+                           for v in read_cameras(run_dir / "pcd_set")["views"]])
+    if 0 < supp < len(supp_vm):
+        pick = torch.randperm(len(supp_vm), generator=torch.Generator().manual_seed(seed))[:supp]
+        supp_vm = supp_vm[pick.sort().values]
+    novel_vm = novel_cameras(scene, novel, offset, seed)
+    supp_tgt = true_views(scene, supp_vm, K, w, h, cache=cache)
+    novel_tgt = true_views(scene, novel_vm, K, w, h, cache=cache)
+    result, renders = {}, {"truth": novel_tgt}
+    for tag, stage, file in (("G0", "pre_opt", "gaussians.ply"), ("G1", "transfer_opt", "scene.ply")):
+        model = GaussianModel.load_ply(run_dir / stage / file)
+        base, _ = score(model, base_vm, K, base_tgt, backend)
+        sup, _ = score(model, supp_vm, K, supp_tgt, backend, iqa_dir)
+        nov, renders[tag] = score(model, novel_vm, K, novel_tgt, backend, iqa_dir)
+        result[tag] = dict(gaussians=len(model), base=base, supp=sup, novel=nov)
+    result["_renders"] = renders
+    return result
+
+
+def run_pipeline(prompt: str, profile: str, sets: list[str], store: Path | None) -> tuple[Path, dict]:
+    """Run (or reuse from the cache) the pipeline for ``prompt``; returns (run folder, summary)."""
+    import io
+    import os
+
+    from holoflow import pipeline
+    from holoflow.progress import make_display
+    from holoflow.runner import Context, Options, run
+    from holoflow.store import Store
+
+    pipe = pipeline.load(Path(__file__).resolve().parent.parent / "pipeline.yaml")
+    st = Store(store or os.environ.get("HOLOFLOW_STORE") or (pipe.root / "artifacts"))
+    opts = Options(prompt=prompt, profile=profile, sets=list(sets))
+    ctx = Context.build(pipe, st, opts)
+    summary = run(ctx, opts, make_display(io.StringIO(), fancy=False))
+    return st.run_dir(summary["run"]), summary
+
+
+def strip_image(renders: dict, k: int = 4) -> "np.ndarray":
+    """A picture: rows truth / G0 / G1 at the first k novel cameras, uint8 [3 H, k W, 3] (sRGB)."""
+    import numpy as np
+
+    rows = [np.concatenate(list(renders[t][:k].numpy()), 1) for t in ("truth", "G0", "G1")]
+    return (np.clip(np.concatenate(rows, 0), 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def _fmt(x) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    if isinstance(x, float) and math.isinf(x):
+        return "inf"
+    return f"{x:.4f}" if abs(x) < 1.5 else f"{x:.2f}"
+
+
+def markdown(results: dict, args, availability: dict, machine: str) -> str:
+    """The report: per-scene table (full method) and the ablation table (means over scenes)."""
+    lines = ["# Reconstruction evaluation (`holoflow eval`)", "",
+             f"Profile `{args.profile}`, seed {args.seed}, {args.novel} novel cameras and {args.supp or 'all'} "
+             f"supplementary cameras per scene (novel offset "
+             f"<= {args.offset} of the free distance, <= {MAX_OFFSET_M} m), backend `{args.backend}`. "
+             f"Machine: {machine}. Images compared in sRGB [0, 1]; `empty` = fraction of pixels with "
+             "rendered alpha < 0.5. base = vs PANO set at the base cameras (paper protocol); supp / novel = "
+             "vs true renders of the procedural scene.", "",
+             "Optional metrics: " + "; ".join(f"{k}: {v}" for k, v in availability.items()), ""]
+    cols = [("base", "psnr"), ("base", "ssim"), ("supp", "psnr"), ("supp", "ssim"), ("supp", "empty"),
+            ("novel", "psnr"), ("novel", "ssim"), ("novel", "empty")]
+    head = "| scene | model | gaussians | " + " | ".join(f"{a} {b}" for a, b in cols) + " | seconds |"
+    lines += ["## Full method per scene", "", head, "|" + "---|" * (len(cols) + 4)]
+    for prompt, per in results.items():
+        r = per.get("full")
+        if r is None:
+            continue
+        for tag in ("G0", "G1"):
+            lines.append(f"| {prompt} | {tag} | {r[tag]['gaussians']} | "
+                         + " | ".join(_fmt(r[tag][a][b]) for a, b in cols) + f" | {_fmt(r['seconds'])} |")
+    lines += ["", "## Ablations (G1, mean over scenes)", "",
+              "| variant | " + " | ".join(f"{a} {b}" for a, b in cols) + " |", "|" + "---|" * (len(cols) + 1)]
+    for variant in VARIANTS:
+        rs = [per[variant]["G1"] for per in results.values() if variant in per]
+        if not rs:
+            continue
+        means = [_mean([r[a][b] for r in rs]) for a, b in cols]
+        lines.append(f"| {variant} (n={len(rs)}) | " + " | ".join(_fmt(m) for m in means) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _mean(xs):
+    xs = [x for x in xs if x is not None and not math.isnan(x)]
+    return sum(xs) / len(xs) if xs else math.nan
+
+
+def _machine() -> str:
+    import os
+    import platform
+
+    model = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")),
+                 platform.processor()) if Path("/proc/cpuinfo").exists() else platform.processor()
+    return f"{os.cpu_count()}-core CPU ({model})"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="holoflow eval", description=__doc__.split("\n\n")[0])
+    p.add_argument("prompts", nargs="*", default=PROMPTS, help="procedural scenes (default: 4 built-in prompts)")
+    p.add_argument("--profile", default="eval")
+    p.add_argument("--set", dest="sets", action="append", default=[], help="stage.param=value, applied to every run")
+    p.add_argument("--variants", default="all", help=f"comma list of {', '.join(VARIANTS)} (default all)")
+    p.add_argument("--novel", type=int, default=8, help="random novel cameras per scene")
+    p.add_argument("--offset", type=float, default=0.3, help="novel eye offset, max fraction of the free distance")
+    p.add_argument("--supp", type=int, default=16, help="supplementary cameras scored per scene (seeded subset; 0 = all)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
+    p.add_argument("--store", type=Path, default=None)
+    p.add_argument("--iqa-dir", default=None, help="folder with brisque_model_live.yml / brisque_range_live.yml")
+    p.add_argument("--out", type=Path, default=Path("docs/eval.md"), help="markdown report")
+    p.add_argument("--json", type=Path, default=None, help="also write all numbers as JSON")
+    p.add_argument("--images", type=Path, default=Path("docs/images"), help="folder for truth/G0/G1 pictures")
+    args = p.parse_args(argv)
+    variants = list(VARIANTS) if args.variants == "all" else args.variants.split(",")
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        print(f"holoflow eval: unknown variant(s) {unknown}; choose from {list(VARIANTS)}", file=sys.stderr)
+        return 2
+
+    from holoflow import metrics
+    from holoflow.recon.preview import write_png
+
+    results: dict = {}
+    cache: dict = {}
+    for prompt in args.prompts:
+        results[prompt] = {}
+        for variant in variants:
+            t0 = time.monotonic()
+            run_dir, _ = run_pipeline(prompt, args.profile, args.sets + VARIANTS[variant], args.store)
+            r = evaluate_run(run_dir, args.novel, args.offset, args.supp, args.seed, args.backend, args.iqa_dir,
+                             cache)
+            renders = r.pop("_renders")
+            r["seconds"] = time.monotonic() - t0
+            results[prompt][variant] = r
+            if variant == "full":
+                args.images.mkdir(parents=True, exist_ok=True)
+                write_png(args.images / f"eval_{_slug(prompt)}.png", strip_image(renders))
+            print(f"eval: {prompt!r} {variant}: G0 novel {_fmt(r['G0']['novel']['psnr'])} dB, "
+                  f"G1 novel {_fmt(r['G1']['novel']['psnr'])} dB, G1 base {_fmt(r['G1']['base']['psnr'])} dB",
+                  file=sys.stderr)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(markdown(results, args, metrics.availability(args.iqa_dir), _machine()))
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1, sort_keys=True))
+    print(f"eval: report in {args.out}", file=sys.stderr)
+    return 0
+
+
+def _slug(text: str) -> str:
+    return "_".join("".join(c if c.isalnum() else " " for c in text.lower()).split())[:40]

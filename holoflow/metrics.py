@@ -1,0 +1,90 @@
+"""Image-quality metrics for reconstruction scoring: PSNR, SSIM, empty-pixel fraction, and the
+no-reference / learned metrics' availability.
+
+Images are float tensors [..., H, W, 3] (channels last, as the rasterizer returns them) in [0, 1],
+compared in the space they are given in (holoflow compares linear-light renders with linear truth,
+clamped to [0, 1]). Depth metrics live in ``holoflow.depth`` (the depth engineer's module), not here.
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import torch
+
+
+def mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+    """Mean squared error over pixels and channels. pred, target [..., H, W, C];
+    mask [..., H, W] (1 = counted) or None. A mask with no pixel gives NaN (nothing was measured)."""
+    err = (pred - target) ** 2                                        # [..., H, W, C]
+    if mask is None:
+        return err.mean()
+    w = mask.to(err.dtype)[..., None].expand_as(err)
+    return (err * w).sum() / w.sum()
+
+
+def psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None,
+         max_val: float = 1.0) -> float:
+    """Peak signal-to-noise ratio in dB, 10 log10(max_val^2 / MSE) over all images together.
+    Identical images give +inf (MSE 0), never a division error; an empty mask gives NaN."""
+    m = float(mse(pred.double(), target.double(), mask))
+    if math.isnan(m):
+        return math.nan
+    if m == 0.0:
+        return math.inf
+    return 10.0 * math.log10(max_val * max_val / m)
+
+
+def ssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11, max_val: float = 1.0) -> float:
+    """Mean structural similarity (Gaussian window, kornia) of images [..., H, W, 3] in [0, max_val].
+    Windows are clipped to the image for images smaller than ``window_size``."""
+    import kornia
+
+    h, w = pred.shape[-3], pred.shape[-2]
+    win = max(1, min(window_size, h, w))
+    win -= 1 - win % 2                                                 # kornia needs an odd window
+    a = pred.reshape(-1, h, w, pred.shape[-1]).permute(0, 3, 1, 2).double()   # [B, C, H, W]
+    b = target.reshape(-1, h, w, target.shape[-1]).permute(0, 3, 1, 2).double()
+    return float(kornia.metrics.ssim(a, b, win, max_val=max_val).mean())
+
+
+def empty_fraction(alpha: torch.Tensor, threshold: float = 0.5) -> float:
+    """Fraction of pixels whose rendered opacity is below ``threshold`` (nothing there). alpha [..., H, W, 1]."""
+    return float((alpha < threshold).double().mean())
+
+
+def brisque(image: torch.Tensor, params_dir: str | os.PathLike | None) -> float | None:
+    """BRISQUE score (lower is better) of one image [H, W, 3] in [0, 1], or None when OpenCV's trained
+    parameters (``brisque_model_live.yml``, ``brisque_range_live.yml``, shipped with opencv_contrib's
+    quality module, not with the wheel) are not in ``params_dir``."""
+    files = _brisque_files(params_dir)
+    if files is None:
+        return None
+    import cv2
+    import numpy as np
+
+    u8 = (image.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).cpu().numpy()[..., ::-1]   # BGR
+    score = cv2.quality.QualityBRISQUE_compute(np.ascontiguousarray(u8), str(files[0]), str(files[1]))
+    return float(score[0])
+
+
+def availability(params_dir: str | os.PathLike | None) -> dict[str, str]:
+    """What each optional metric needs and whether it is here: 'available' or 'unavailable: why'.
+    Missing metrics are reported, never approximated."""
+    return {
+        "lpips": ("unavailable: no local LPIPS network weights (the `lpips` package needs torchvision, "
+                  "which cannot be installed beside the CPU torch pin)"),
+        "niqe": "unavailable: no NIQE implementation with pristine-model parameters installed",
+        "brisque": ("available" if _brisque_files(params_dir) else
+                    "unavailable: brisque_model_live.yml / brisque_range_live.yml (opencv_contrib) not found"
+                    + (f" in {params_dir}" if params_dir else "; pass --iqa-dir")),
+    }
+
+
+def _brisque_files(params_dir: str | os.PathLike | None) -> tuple[Path, Path] | None:
+    if not params_dir:
+        return None
+    d = Path(params_dir)
+    model, rng = d / "brisque_model_live.yml", d / "brisque_range_live.yml"
+    return (model, rng) if model.is_file() and rng.is_file() else None

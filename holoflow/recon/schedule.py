@@ -1,0 +1,138 @@
+"""The paper's two optimisation schedules (Enhanced Two-Stage Panorama Reconstruction).
+
+Pre Optimization (G0): Gaussians from P_f; the PCD set first, with the loss masked to pixels where
+a point landed, so the densification that happens in this phase is steered by several viewpoints
+around each base camera; then the PANO set alone, to restore the panorama's detail.
+Transfer Optimization (G1): fresh Gaussians from P_f, trained on the PANO and INP sets together.
+
+Each phase is one ``holoflow.splat.train`` call; the optimiser state and learning-rate schedule start
+afresh at each phase (the paper gives iteration counts per phase, nothing more). Opacity reset is off
+by default (``opacity_reset_every: 0``), as in the paper: it would wipe the point cloud's placement.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Callable
+
+import numpy as np
+import torch
+
+from holoflow import metrics
+
+Progress = Callable[[int, int], None]
+
+
+def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float = 0.1):
+    """Gaussians (SH degree 0) at the points xyz [N, 3] metres, coloured rgb [N, 3] uint8 (sRGB), with
+    initial ``opacity`` (3DGS: 0.1; a surface point cloud tolerates more, which shortens training)."""
+    from holoflow.splat import GaussianModel
+
+    if len(xyz) == 0:
+        raise ValueError("the point cloud is empty: nothing to initialise Gaussians from")
+    if not 0.0 < opacity < 1.0:
+        raise ValueError(f"init_opacity must be in (0, 1), got {opacity}")
+    return GaussianModel.from_points(np.asarray(xyz, np.float32), np.asarray(rgb_u8, np.float32) / 255.0,
+                                     sh_degree=0, opacity=opacity)
+
+
+def train_config(iterations: int, params: dict, backend: str):
+    """A ``holoflow.splat.TrainConfig`` for one phase from a stage's params: ``densify_every``,
+    ``densify_from`` (densification runs at steps densify_from < it <= iterations - densify_every),
+    ``opacity_reset_every`` (0 = never, the paper) and ``max_gaussians``; ``backend`` is the
+    rasterizer (the stage's engine)."""
+    from holoflow.splat import TrainConfig
+
+    every = int(params.get("densify_every", 100))
+    # the last densification leaves at least ``every`` steps to train what it added
+    return TrainConfig(iterations=int(iterations), densify_every=every,
+                       densify_from=int(params.get("densify_from", 500)),
+                       densify_until=max(1, int(iterations) - every + 1),
+                       opacity_reset_every=int(params.get("opacity_reset_every", 0)),
+                       max_gaussians=int(params.get("max_gaussians", 2_000_000)), backend=backend)
+
+
+def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, backend: str, seed: int,
+               progress: Progress | None = None) -> dict:
+    """Train ``model`` in place through ``phases`` = [(name, views, iterations)], in order; phases with
+    0 iterations are skipped. ``progress(done, total)`` counts iterations over all phases.
+    Returns the log: per phase the trainer's log, wall seconds, Gaussian count after it."""
+    from holoflow.splat import train
+
+    total = sum(max(0, n) for _, _, n in phases)
+    done = 0
+    log: dict = {"phases": [], "total_iterations": total}
+    for i, (name, views, iters) in enumerate(phases):
+        if iters <= 0:
+            continue
+        if not views:
+            raise ValueError(f"phase {name}: no training views")
+        start = done
+
+        def phase_progress(k, _n=None, _start=start):
+            if progress is not None:
+                progress(_start + int(k), total)
+
+        t0 = time.perf_counter()
+        tlog = train(model, views, train_config(iters, params, backend), progress=phase_progress,
+                     seed=seed + 1000 * i)
+        done += iters
+        log["phases"].append(dict(name=name, iterations=iters, views=len(views),
+                                  seconds=round(time.perf_counter() - t0, 3),
+                                  gaussians=int(model.means.shape[0]), train=tlog))
+    return log
+
+
+def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pano_views: list[dict],
+                 params: dict, backend: str, seed: int,
+                 progress: Progress | None = None):
+    """G0: init from P_f, ``pcd_iters`` on the PCD set (masked), then ``pano_iters`` on the PANO set.
+    Returns (model, log)."""
+    model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)))
+    log = run_phases(model, [("pcd", pcd_views, int(params["pcd_iters"])),
+                             ("pano", pano_views, int(params["pano_iters"]))], params, backend, seed, progress)
+    return model, log
+
+
+def transfer_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pano_views: list[dict], inp_views: list[dict],
+                      params: dict, backend: str, seed: int,
+                      progress: Progress | None = None):
+    """G1: fresh init from P_f, ``iters`` on PANO + INP sets together (INP left out when
+    ``params['use_inp']`` is false: the paper's ablation). Returns (model, log)."""
+    model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)))
+    views = pano_views + (inp_views if params.get("use_inp", True) else [])
+    log = run_phases(model, [("pano+inp" if params.get("use_inp", True) else "pano", views,
+                              int(params["iters"]))], params, backend, seed, progress)
+    return model, log
+
+
+@torch.no_grad()
+def render_views(model, views: list[dict], backend: str, chunk: int = 8) -> tuple[torch.Tensor, torch.Tensor]:
+    """Render ``model`` at every view's camera (all views share one image size).
+    Returns rgb [C, H, W, 3] (sRGB, clamped to [0, 1]) and alpha [C, H, W, 1]."""
+    from holoflow.splat import render
+
+    h, w = views[0]["image"].shape[:2]
+    dev = model.means.device
+    rgbs, alphas = [], []
+    for s in range(0, len(views), chunk):
+        part = views[s:s + chunk]
+        vm = torch.stack([v["viewmat"] for v in part]).to(dev)
+        K = torch.stack([v["K"] for v in part]).to(dev)
+        out = render(model, vm, K, w, h, backend=backend)
+        rgbs.append(out["rgb"].clamp(0, 1).cpu())
+        alphas.append(out["alpha"].cpu())
+    return torch.cat(rgbs), torch.cat(alphas)
+
+
+def score_views(model, views: list[dict], backend: str) -> dict:
+    """PSNR (dB, masked by the views' masks when they have them), SSIM (unmasked sets only) and empty
+    fraction of ``model`` against the views' own images: the fit to the training set."""
+    rgb, alpha = render_views(model, views, backend)
+    target = torch.stack([v["image"] for v in views])
+    masks = [v["mask"] for v in views]
+    mask = torch.stack(masks) if all(m is not None for m in masks) else None
+    p = metrics.psnr(rgb, target, mask)
+    return dict(psnr=None if math.isnan(p) else p,
+                ssim=metrics.ssim(rgb, target) if mask is None else None,    # SSIM windows ignore masks
+                empty_fraction=metrics.empty_fraction(alpha))

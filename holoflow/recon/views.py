@@ -1,0 +1,104 @@
+"""View sets (PANO / PCD / INP) as training views, and back to files.
+
+A view set is a folder with ``cameras.json`` and ``views/*.exr`` (docs/artifacts.md). EXR colour is
+linear light; Gaussians are trained on display-referred sRGB in [0, 1], the space every 3DGS viewer
+shows SH colours in (and the space of the point-cloud PLY colours Gaussians start from), so
+``scene.ply`` looks right in SuperSplat and PSNR is measured where the paper measures it.
+
+A training view is a dict ``{"name", "image" [H, W, 3] sRGB float32, "mask" [H, W] float32 (1 =
+supervise) or None, "viewmat" [4, 4] world-to-camera, "K" [3, 3]}`` (the ``holoflow.splat.train``
+view contract, plus a name).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from holoflow.io.exr import read_exr, write_rgb
+
+
+def linear_to_srgb(x: torch.Tensor) -> torch.Tensor:
+    """Linear light [..., H, W, 3] -> sRGB-encoded [0, 1] (clamped first)."""
+    import kornia
+
+    c = x.clamp(0, 1).movedim(-1, -3)                                  # [..., 3, H, W]
+    return kornia.color.linear_rgb_to_rgb(c).clamp(0, 1).movedim(-3, -1)
+
+
+def srgb_to_linear(x: torch.Tensor) -> torch.Tensor:
+    """sRGB-encoded [0, 1] [..., H, W, 3] -> linear light."""
+    import kornia
+
+    return kornia.color.rgb_to_linear_rgb(x.clamp(0, 1).movedim(-1, -3)).movedim(-3, -1)
+
+
+def read_cameras(folder: str | Path) -> dict:
+    """``cameras.json`` of a view-set folder (docs/artifacts.md), via holoflow.geometry.export."""
+    from holoflow.geometry.export import read_cameras as _read
+
+    return _read(Path(folder) / "cameras.json")
+
+
+def intrinsics(cams: dict) -> torch.Tensor:
+    """Pinhole K [3, 3] (pixels, centres at +0.5) of a cameras.json dict."""
+    return torch.tensor([[cams["fx"], 0.0, cams["cx"]], [0.0, cams["fy"], cams["cy"]], [0.0, 0.0, 1.0]],
+                        dtype=torch.float32)
+
+
+def load_view_set(folder: str | Path, alpha_is_mask: bool) -> tuple[list[dict], dict]:
+    """Training views of a view-set folder, in cameras.json order, and the cameras dict.
+
+    ``alpha_is_mask``: use the EXR's A channel as the supervision mask (the PCD set: 1 = a point
+    landed); otherwise every pixel is supervised (PANO set; INP set, whose A only records what was
+    inpainted). Returns (views, cameras)."""
+    folder = Path(folder)
+    cams = read_cameras(folder)
+    K = intrinsics(cams)
+    views = []
+    for v in cams["views"]:
+        ch, _ = read_exr(folder / v["file"])
+        rgb = torch.from_numpy(np.stack([ch["R"], ch["G"], ch["B"]], -1))   # [H, W, 3] linear
+        mask = None
+        if alpha_is_mask:
+            if "A" not in ch:
+                raise ValueError(f"{folder / v['file']}: no A channel (the mask) in a masked view set")
+            mask = torch.from_numpy((ch["A"] >= 0.5).astype(np.float32))     # [H, W]
+        views.append(dict(name=v["name"], image=linear_to_srgb(rgb).contiguous(), mask=mask,
+                          viewmat=torch.tensor(v["viewmat"], dtype=torch.float32).reshape(4, 4), K=K.clone()))
+    return views, cams
+
+
+def stack_cameras(views: list[dict]) -> tuple[torch.Tensor, torch.Tensor]:
+    """viewmats [C, 4, 4] and Ks [C, 3, 3] of a list of views."""
+    return torch.stack([v["viewmat"] for v in views]), torch.stack([v["K"] for v in views])
+
+
+def write_images(folder: str | Path, files: list[str], images_srgb: np.ndarray, alpha: np.ndarray,
+                 stage: str) -> None:
+    """Write ``folder/files[i]`` as EXR: R, G, B linear (from sRGB images [N, H, W, 3]), A = alpha [N, H, W]."""
+    folder = Path(folder)
+    linear = srgb_to_linear(torch.from_numpy(np.asarray(images_srgb, np.float32))).numpy()
+    for i, name in enumerate(files):
+        path = folder / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_rgb(path, linear[i], {"holoflow.stage": stage}, A=np.asarray(alpha[i], np.float32))
+
+
+def write_view_set(folder: str | Path, cams: dict, images_srgb: np.ndarray, alpha: np.ndarray,
+                   stage: str) -> None:
+    """Write a view set: one EXR per camera of ``cams`` (same order; see ``write_images``), plus
+    cameras.json and a nerfstudio transforms.json."""
+    from holoflow.geometry.export import write_cameras, write_transforms
+
+    folder = Path(folder)
+    write_images(folder, [v["file"] for v in cams["views"]], images_srgb, alpha, stage)
+    write_cameras(folder / "cameras.json", cams)
+    write_transforms(folder / "transforms.json", cams)
+
+
+def dumps_log(log: dict) -> str:
+    """A training log as stable JSON text (sorted keys, finite floats only)."""
+    return json.dumps(log, sort_keys=True, indent=1, default=float, allow_nan=True)

@@ -1,0 +1,48 @@
+"""inp_set: G0 rendered at every supplementary camera; missing pixels (rendered alpha below
+alpha_threshold, or no point landed in the PCD set) filled by the inpainting engine. Writes
+views/NNN_K.exr (R,G,B inpainted, linear; A = 1 observed, 0 inpainted), renders/NNN_K.exr (G0's render
+before inpainting: R,G,B + A = rendered alpha, for inspection), cameras.json, transforms.json."""
+from __future__ import annotations
+
+import json
+import sys
+
+
+def main() -> int:
+    from holoflow.stage import Job
+
+    job = Job.from_argv()
+    import numpy as np
+    import torch
+
+    from holoflow.recon.inpaint import inpaint_views, missing_mask
+    from holoflow.recon.schedule import render_views
+    from holoflow.recon.views import load_view_set, write_images, write_view_set
+    from holoflow.splat import GaussianModel
+
+    p = job.params
+    model = GaussianModel.load_ply(job.input_file("gaussians", "gaussians.ply"))
+    views, cams = load_view_set(job.input("pcd"), alpha_is_mask=True)
+    rgb, alpha = render_views(model, views, backend="auto")               # [N, H, W, 3], [N, H, W, 1]
+    rgb, alpha = rgb.numpy(), alpha[..., 0].numpy()
+    pcd_valid = torch.stack([v["mask"] for v in views]).numpy()            # [N, H, W]
+    missing = missing_mask(alpha, pcd_valid, float(p["alpha_threshold"]))
+    filled = inpaint_views(rgb, missing, job.engine, p, job.device,
+                           progress=job.progress)
+    write_view_set(job.output_dir, cams, filled, (~missing).astype(np.float32), "inp_set")
+    write_images(job.output_dir, [v["file"].replace("views/", "renders/", 1) for v in cams["views"]],
+                 rgb, alpha, "inp_set")
+    per_view = missing.reshape(len(missing), -1).mean(1)
+    job.meta(views=len(views), inpainted_views=int((per_view > 0).sum()),
+             missing_fraction=float(missing.mean()), max_view_missing=float(per_view.max(initial=0.0)),
+             engine=job.engine, method=p.get("method") if job.engine == "opencv" else p.get("model"))
+    return 0
+
+
+if __name__ == "__main__":
+    from holoflow.engines.weights import MissingWeights
+
+    try:
+        sys.exit(main())
+    except (ValueError, json.JSONDecodeError, MissingWeights) as exc:
+        sys.exit(f"inp_set: {str(exc).splitlines()[0]}")

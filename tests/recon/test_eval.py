@@ -1,0 +1,35 @@
+"""holoflow eval's pure parts: novel cameras stay in free space, the report formats every number."""
+import argparse
+import math
+
+import torch
+
+from holoflow import eval as heval
+
+
+def test_novel_cameras_are_seeded_and_inside_free_space():
+    from holoflow.scene import cast, scene_from_prompt
+
+    scene = scene_from_prompt("a modern living room with a sofa", 0)
+    a = heval.novel_cameras(scene, 6, 0.3, seed=1)
+    b = heval.novel_cameras(scene, 6, 0.3, seed=1)
+    assert torch.equal(a, b) and a.shape == (6, 4, 4)
+    R, t = a[:, :3, :3].double(), a[:, :3, 3].double()
+    eyes = -torch.einsum("cji,cj->ci", R, t)                                   # camera centres
+    assert (eyes.norm(dim=1) <= heval.MAX_OFFSET_M + 1e-5).all()
+    # the segment centre -> eye is free: the first hit from the centre lies beyond the eye
+    d = torch.nn.functional.normalize(eyes, dim=1)
+    _, hit = cast(scene, torch.zeros(6, 3), d.float())
+    assert (hit.double() > eyes.norm(dim=1)).all()
+    assert torch.allclose(R @ R.transpose(1, 2), torch.eye(3, dtype=torch.float64).expand(6, 3, 3), atol=1e-5)
+
+
+def test_report_formats_inf_nan_and_marks_unavailable_metrics():
+    row = {"psnr": math.inf, "ssim": 1.0, "empty": 0.0}
+    nan = {"psnr": math.nan, "ssim": 0.5, "empty": 0.25}
+    r = {"G0": {"gaussians": 10, "base": row, "supp": nan, "novel": nan},
+         "G1": {"gaussians": 12, "base": row, "supp": row, "novel": row}, "seconds": 3.0}
+    args = argparse.Namespace(profile="eval", seed=0, novel=2, supp=2, offset=0.3, backend="cpu")
+    md = heval.markdown({"a room": {"full": r, "no_inp": r}}, args, {"lpips": "unavailable: x"}, "2-core CPU")
+    assert "| a room | G1 | 12 | inf |" in md
+    assert "lpips: unavailable" in md and "no_inp (n=1)" in md
