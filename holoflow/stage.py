@@ -14,7 +14,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, NoReturn
 
 
 @dataclass
@@ -90,6 +90,24 @@ class Job:
     def meta(self, **info: Any) -> None:
         """Add provenance (model identity, metrics, engine facts) to the step's record."""
         emit("meta", info)
+
+
+class UserError(Exception):
+    """A mistake the user can fix (bad param, missing weights): reported as one line, no traceback."""
+
+
+USER_ERRORS = (UserError, ValueError, OSError, ImportError, json.JSONDecodeError)
+
+
+def run_main(main: Callable[[], int], stage: str) -> NoReturn:
+    """Exit with ``main()``'s code. A user mistake (``USER_ERRORS``) ends as one line on stderr,
+    prefixed with the stage name, and exit code 1; anything else keeps its traceback (a bug)."""
+    try:
+        code = main()
+    except USER_ERRORS as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        sys.exit(f"{stage}: {first}")
+    sys.exit(code)
 
 
 def emit(kind: str, payload: dict[str, Any]) -> None:

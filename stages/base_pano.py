@@ -7,12 +7,10 @@ with circular latent blending (holoflow.engines.diffusion360); no depth.
 """
 from __future__ import annotations
 
-import sys
+from holoflow.stage import Job, run_main
 
 
 def main() -> int:
-    from holoflow.stage import Job
-
     job = Job.from_argv()
     from holoflow.io.exr import write_rgb
 
@@ -61,16 +59,5 @@ def _size(p: dict) -> tuple[int, int]:
     return width, height
 
 
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from holoflow.engines.weights import MissingWeights
-
-    return (ValueError, OSError, ImportError, MissingWeights)
-
-
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except Exception as exc:  # a user mistake ends in one line; anything else keeps its traceback
-        if isinstance(exc, _user_errors()):
-            sys.exit(f"base_pano: {exc}")
-        raise
+    run_main(main, "base_pano")

@@ -10,12 +10,11 @@ the rig leaves part of the sphere unseen.
 from __future__ import annotations
 
 import os
-import sys
+
+from holoflow.stage import Job, run_main
 
 
 def main() -> int:
-    from holoflow.stage import Job
-
     job = Job.from_argv()
     import torch
 
@@ -60,7 +59,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except (ValueError, OSError) as exc:  # a user mistake ends in one line
-        sys.exit(f"pano_set: {exc}")
+    run_main(main, "pano_set")

@@ -11,12 +11,11 @@ antialiased, depth point-sampled (no invented edge depths). PLY colours are 8-bi
 from __future__ import annotations
 
 import os
-import sys
+
+from holoflow.stage import Job, run_main
 
 
 def main() -> int:
-    from holoflow.stage import Job
-
     job = Job.from_argv()
     import kornia
     import torch
@@ -67,7 +66,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except (ValueError, OSError) as exc:  # a user mistake ends in one line
-        sys.exit(f"point_cloud: {exc}")
+    run_main(main, "point_cloud")

@@ -8,12 +8,10 @@ lineart of the base panorama (holoflow.engines.controlnet_lineart).
 """
 from __future__ import annotations
 
-import sys
+from holoflow.stage import Job, run_main
 
 
 def main() -> int:
-    from holoflow.stage import Job
-
     job = Job.from_argv()
     from holoflow.imageops.lineart import lineart
     from holoflow.imageops.resize import lanczos_resize
@@ -55,16 +53,5 @@ def main() -> int:
     return 0
 
 
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from holoflow.engines.weights import MissingWeights
-
-    return (ValueError, OSError, ImportError, MissingWeights)
-
-
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except Exception as exc:  # a user mistake ends in one line; anything else keeps its traceback
-        if isinstance(exc, _user_errors()):
-            sys.exit(f"stylize: {exc}")
-        raise
+    run_main(main, "stylize")

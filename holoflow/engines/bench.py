@@ -116,7 +116,7 @@ def run_case(name: str, size: dict, folder: Path, full: bool, device: str) -> fl
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="holoflow.engines.bench", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="holoflow bench engines", description=__doc__.splitlines()[0])
     ap.add_argument("--full", action="store_true", help="published architectures at the paper's sizes")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--only", nargs="*", default=list(CASES), choices=list(CASES))

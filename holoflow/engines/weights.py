@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from holoflow.stage import UserError
+
 # Default model ids per engine role (the paper's choices; docs/engines.md).
 DEFAULTS: dict[str, str] = {
     "diffusion360": "archerfmy0831/sd-t2i-360panoimage/sd-base",
@@ -31,7 +33,7 @@ DEFAULTS: dict[str, str] = {
 WEIGHT_SUFFIXES = (".safetensors", ".pth", ".pt", ".bin")
 
 
-class MissingWeights(RuntimeError):
+class MissingWeights(UserError, RuntimeError):
     """Model weights are not available locally; ``str(err)`` is one line for the user."""
 
 
