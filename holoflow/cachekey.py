@@ -9,12 +9,15 @@ key = sha256(canonical JSON of {stage, code, engine, params, inputs, seed[, prom
   (relative file name -> object digest). Downstream keys depend on upstream OUTPUT bytes, so a rerun
   that reproduces the same bytes leaves them unchanged (early cutoff).
 - ``prompt`` is included only for stages declaring ``prompt: true``.
+- Non-finite floats (``--set point_cloud.grad_threshold=.inf``) hash as ``{"float": "inf"}``,
+  ``{"float": "-inf"}`` or ``{"float": "nan"}``; finite values hash as plain JSON numbers.
 """
 from __future__ import annotations
 
 import ast
 import hashlib
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -119,7 +122,18 @@ def components(stage: str, code: dict[str, str], engine: str, params: dict[str, 
 
 
 def cache_key(comp: dict[str, Any]) -> str:
-    return hashlib.sha256(canonical_json(comp).encode()).hexdigest()
+    return hashlib.sha256(canonical_json(finite_json(comp)).encode()).hexdigest()
+
+
+def finite_json(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by its tag {"float": "inf" | "-inf" | "nan"}."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return {"float": "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")}
+    if isinstance(value, dict):
+        return {k: finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_json(v) for v in value]
+    return value
 
 
 def reasons(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
@@ -129,7 +143,7 @@ def reasons(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
         out.append(f"engine changed: {old.get('engine')} -> {new.get('engine')}")
     op, np_ = old.get("params", {}), new.get("params", {})
     for k in sorted(set(op) | set(np_)):
-        if op.get(k, "<unset>") != np_.get(k, "<unset>"):
+        if finite_json(op.get(k, "<unset>")) != finite_json(np_.get(k, "<unset>")):
             out.append(f"params changed: {new['stage']}.{k} {_short(op.get(k, '<unset>'))} -> "
                        f"{_short(np_.get(k, '<unset>'))}")
     oc, nc = old.get("code", {}), new.get("code", {})

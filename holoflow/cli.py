@@ -77,20 +77,35 @@ def _parser() -> argparse.ArgumentParser:
             sp.add_argument("--seed", type=int, help="override the pipeline's seed")
 
     r = sub.add_parser("run", help="run the pipeline (cached steps are served from the store)")
-    r.add_argument("prompt", nargs="?", help="text prompt (default: the last run's prompt)")
-    common(r)
-    r.add_argument("--from", dest="from_stage", metavar="STAGE", help="run STAGE and what depends on it")
-    r.add_argument("--until", metavar="STAGE", help="run STAGE and what it depends on")
-    r.add_argument("--only", metavar="STAGE", help="run STAGE alone (its inputs must be cached)")
-    r.add_argument("--force", action="append", default=[], metavar="STAGE",
-                   help="rerun STAGE even if cached ('all' for every stage); repeatable")
-    r.add_argument("--dry-run", action="store_true", help="say what would run; run nothing")
-    r.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
-    r.add_argument("--device", choices=["cpu", "cuda", "auto"],
-                   help="device named in each job spec (default $HOLOFLOW_DEVICE, else cpu; auto = cuda when "
-                   "an NVIDIA driver is present); not part of the cache key")
-    r.add_argument("--lock-timeout", type=float, metavar="S", help="give up if the store stays locked S seconds")
-    r.add_argument("-v", "--verbose", action="store_true", help="echo the steps' output")
+    sw = sub.add_parser("sweep", help="run a grid over params (x prompts) as one batch (docs/scale.md)")
+    for r in (sw, r):
+        r.add_argument("prompt", nargs="?", help="text prompt (default: the last run's prompt)")
+        common(r)
+        r.add_argument("--from", dest="from_stage", metavar="STAGE", help="run STAGE and what depends on it")
+        r.add_argument("--until", metavar="STAGE", help="run STAGE and what it depends on")
+        r.add_argument("--only", metavar="STAGE", help="run STAGE alone (its inputs must be cached)")
+        r.add_argument("--force", action="append", default=[], metavar="STAGE",
+                       help="rerun STAGE even if cached ('all' for every stage); repeatable")
+        r.add_argument("--dry-run", action="store_true", help="say what would run; run nothing")
+        r.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+        r.add_argument("--device", choices=["cpu", "cuda", "auto"],
+                       help="device named in each job spec (default $HOLOFLOW_DEVICE, else cpu; auto = cuda when "
+                       "an NVIDIA driver is present); not part of the cache key")
+        r.add_argument("--lock-timeout", type=float, metavar="S",
+                       help="give up if the store stays locked S seconds")
+        r.add_argument("-v", "--verbose", action="store_true", help="echo the steps' output")
+        r.add_argument("-j", "--jobs", type=int, default=1, metavar="N",
+                       help="run up to N CPU slots of independent steps at once (stages' resources:)")
+        r.add_argument("--executor", choices=["local", "ray"], default="local",
+                       help="where steps run: this machine, or a Ray cluster (the ray extra)")
+        r.add_argument("--address", help="Ray cluster address (default: start a local Ray with -j CPUs)")
+        r.add_argument("--retries", type=int, metavar="N",
+                       help="retry a failed step N times (default 0 local, 2 ray)")
+        r.add_argument("--prompts", metavar="FILE",
+                       help="a batch: one prompt per line, or a YAML list of {prompt, set, seed}")
+    sw.add_argument("--grid", action="append", default=[], metavar="STAGE.PARAM=V1,V2",
+                    help="a sweep axis (repeatable: the grid is their product)")
+    sw.set_defaults(func=cmd_sweep)
     r.set_defaults(func=cmd_run)
 
     s = sub.add_parser("status", help="fresh / stale / missing per stage, and why")
@@ -164,7 +179,9 @@ def _options(args):
                    only=getattr(args, "only", None), force=getattr(args, "force", []),
                    dry_run=getattr(args, "dry_run", False), seed=getattr(args, "seed", None),
                    device=getattr(args, "device", None), lock_timeout=getattr(args, "lock_timeout", None),
-                   verbose=getattr(args, "verbose", False))
+                   verbose=getattr(args, "verbose", False), jobs=getattr(args, "jobs", 1),
+                   executor=getattr(args, "executor", "local"), address=getattr(args, "address", None),
+                   retries=getattr(args, "retries", None))
 
 
 # -- commands --------------------------------------------------------------------------------------
@@ -173,6 +190,13 @@ def cmd_run(args) -> int:
     from .runner import Context, StepFailed, run
 
     pipe, store = _load(args)
+    if args.prompts:
+        from .batch import SceneSpec, read_prompts, run_scenes
+
+        specs = read_prompts(args.prompts)
+        if args.prompt is not None:
+            specs = [SceneSpec(args.prompt)] + specs
+        return run_scenes(args, pipe, store, specs)
     opts = _options(args)
     ctx = Context.build(pipe, store, opts)
     out = sys.stderr if args.json else sys.stdout
@@ -201,8 +225,21 @@ def cmd_run(args) -> int:
     return 0
 
 
+def cmd_sweep(args) -> int:
+    from .batch import SceneSpec, read_prompts, run_scenes, sweep
+
+    pipe, store = _load(args)
+    if not args.grid:
+        return _fail("holoflow sweep needs at least one --grid STAGE.PARAM=V1,V2; fix: e.g. "
+                     "--grid detail.strength=0.3,0.5,0.7")
+    prompts = read_prompts(args.prompts) if args.prompts else []
+    if args.prompt is not None or not prompts:
+        prompts = [SceneSpec(args.prompt)] + prompts
+    return run_scenes(args, pipe, store, sweep(prompts, args.grid))
+
+
 def cmd_status(args) -> int:
-    from .runner import Context, status
+    from .runner import Context, describe_ran, status
 
     pipe, store = _load(args)
     ctx = Context.build(pipe, store, _options(args))
@@ -212,7 +249,7 @@ def cmd_status(args) -> int:
         return 0
     width = max(len(n) for n in st)
     for name, s in st.items():
-        why = "; ".join(s["reasons"])
+        why = "; ".join(s["reasons"]) or describe_ran(s.get("ran"))
         print(f"{name:<{width}}  {s['state']:<7}  {why}".rstrip())
     return 0
 

@@ -18,8 +18,9 @@ Schema (docs/cli.md has the user-facing version)::
         code: [holoflow/imageops] # optional; files/folders whose source is part of the cache key
         primary: pano.exr         # optional; name a single `--use` file takes in the stage's outputs
         params: {strength: 0.5}   # optional; defaults, their types are checked on override
+        resources: {cpus: 1, gpus: 0, memory_gb: 2}   # optional; what one step needs (scheduling)
     profiles:
-      NAME: {STAGE: {engine: X, PARAM: VALUE}}
+      NAME: {STAGE: {engine: X, PARAM: VALUE, resources: {gpus: 1}}}
 """
 from __future__ import annotations
 
@@ -30,12 +31,32 @@ from typing import Any
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _TOP_KEYS = {"version", "seed", "default_profile", "stages", "profiles"}
-_STAGE_KEYS = {"run", "engine", "engines", "prompt", "inputs", "code", "primary", "params"}
+_STAGE_KEYS = {"run", "engine", "engines", "prompt", "inputs", "code", "primary", "params", "resources"}
+_RESOURCE_KEYS = {"cpus": int, "gpus": int, "memory_gb": float}
 SUPPORTED_VERSIONS = (1,)
 
 
 class PipelineError(Exception):
     """A mistake in pipeline.yaml, a profile, ``--set`` or ``--use``: one line, with the fix."""
+
+
+@dataclass(frozen=True)
+class Resources:
+    """What one step of a stage needs while it runs: scheduling only, never part of the cache key.
+
+    ``cpus``: threads the step may use (its OMP/MKL/OpenBLAS/numba thread count); ``gpus``: whole GPUs
+    (a GPU stage never shares one); ``memory_gb``: peak resident memory, GiB (0 = unknown/small).
+    """
+
+    cpus: int = 1
+    gpus: int = 0
+    memory_gb: float = 0.0
+
+    def replace(self, **over: Any) -> "Resources":
+        return Resources(**{**self.as_dict(), **over})
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"cpus": self.cpus, "gpus": self.gpus, "memory_gb": self.memory_gb}
 
 
 @dataclass(frozen=True)
@@ -51,6 +72,7 @@ class Stage:
     code: tuple[str, ...]          # paths relative to the pipeline's folder
     params: dict[str, Any]
     primary: str | None = None
+    resources: Resources = Resources()
 
 
 @dataclass
@@ -100,6 +122,7 @@ class Resolved:
     engine: str
     params: dict[str, Any]
     overrides: dict[str, str] = field(default_factory=dict)   # param -> where it was set
+    resources: Resources = Resources()
 
 
 def _err(path: Path, stage: str | None, msg: str, fix: str) -> PipelineError:
@@ -245,7 +268,31 @@ def _stage(path: Path, name: Any, block: Any) -> Stage:
     primary = block.get("primary")
     if primary is not None and (not isinstance(primary, str) or not primary or "/" in primary):
         raise _err(path, name, f"`primary:` is {primary!r}", "name one output file, e.g. `primary: pano.exr`")
-    return Stage(name, run, engine, tuple(engines), prompt, dict(inputs), tuple(code), dict(params), primary)
+    resources = _resources(path, name, block.get("resources"), Resources(), "`resources:`")
+    return Stage(name, run, engine, tuple(engines), prompt, dict(inputs), tuple(code), dict(params), primary,
+                 resources)
+
+
+def _resources(path: Path, stage: str, raw: Any, base: Resources, origin: str) -> Resources:
+    """``base`` with the keys of mapping ``raw`` (cpus >= 1, gpus >= 0 integers, memory_gb >= 0)."""
+    if raw is None:
+        return base
+    if not isinstance(raw, dict):
+        raise _err(path, stage, f"{origin} is {_kind(raw)}, not a mapping",
+                   "write e.g. `resources: {cpus: 1, gpus: 0, memory_gb: 2}`")
+    over = {}
+    for key, value in raw.items():
+        if key not in _RESOURCE_KEYS:
+            raise _err(path, stage, f"{origin} has unknown key '{key}'",
+                       f"use only {', '.join(_RESOURCE_KEYS)}{_suggest(str(key), _RESOURCE_KEYS)}")
+        ok = (_is_int(value) if _RESOURCE_KEYS[key] is int
+              else isinstance(value, (int, float)) and not isinstance(value, bool) and value == value)
+        low = 1 if key == "cpus" else 0
+        if not ok or value < low or value == float("inf"):
+            kind = "an integer" if _RESOURCE_KEYS[key] is int else "a number"
+            raise _err(path, stage, f"{origin} sets {key}={value!r}", f"give {key} {kind} >= {low}")
+        over[key] = _RESOURCE_KEYS[key](value)
+    return base.replace(**over)
 
 
 def check_files(pipe: Pipeline, name: str) -> None:
@@ -322,6 +369,9 @@ def _profiles(path: Path, raw: Any, stages: dict[str, Stage]) -> dict[str, dict[
 
 def _check_override(path: Path, stage: Stage, key: str, value: Any, origin: str) -> Any:
     """Validate one override; returns the value in its canonical type (int -> float for float params)."""
+    if key == "resources":          # validated here; merged over the stage's current resources in _apply
+        _resources(path, stage.name, value, stage.resources, f"{origin} resources")
+        return {k: _RESOURCE_KEYS[k](v) for k, v in value.items()}
     if key == "engine":
         if value not in stage.engines:
             raise _err(path, stage.name, f"{origin} sets engine '{value}', not one of {list(stage.engines)}",
@@ -377,7 +427,7 @@ def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[
                             f"{', '.join(pipe.profiles) or '(none defined)'}{_suggest(name, pipe.profiles)}")
     out = {}
     for s in pipe.stages.values():
-        out[s.name] = Resolved(s, s.engine, dict(s.params))
+        out[s.name] = Resolved(s, s.engine, dict(s.params), resources=s.resources)
     for sname, over in (pipe.profiles.get(name, {}) if name else {}).items():
         for key, value in over.items():
             _apply(out[sname], key, _check_override(pipe.path, out[sname].stage, key, value,
@@ -407,6 +457,8 @@ def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[
 def _apply(r: Resolved, key: str, value: Any, origin: str) -> None:
     if key == "engine":
         r.engine = value
+    elif key == "resources":
+        r.resources = r.resources.replace(**value)
     else:
         r.params[key] = value
     r.overrides[key] = origin

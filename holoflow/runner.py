@@ -1,9 +1,11 @@
-"""The runner: plan a run over the DAG, serve cached steps, run the rest as processes, commit results.
+"""The runner: plan a run (or a batch of scenes) over the DAG, serve cached steps, hand the rest to an
+executor, record the runs.
 
 A step runs as ``[python, PROGRAM, JOB.json]`` (or ``[PROGRAM, JOB.json]``) with no shell, its outputs
-in a staging folder under the store's tmp/. After exit 0 each output is hashed and moved into
-objects/, then the key record is written last (docs/store.md). Nothing here imports numpy or torch:
-a fully cached run and ``status`` cost a few stats and JSON reads.
+in a staging folder under the store's tmp/; after exit 0 its outputs are hashed into objects/ and the
+key record is written last (holoflow/executors/step.py, docs/store.md). Executors (local threads with
+resource slots, or Ray) only decide where and when a step runs (docs/scale.md). Nothing here imports
+numpy, torch or subprocess: a fully cached run and ``status`` cost a few stats and JSON reads.
 """
 from __future__ import annotations
 
@@ -11,18 +13,15 @@ import json
 import os
 import shutil
 import signal
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from . import __version__
 from .cachekey import CodeHasher, cache_key, components, reasons, tree_digest
+from .executors import StepTask
 from .pipeline import Pipeline, PipelineError, Resolved, check_files, resolve
-from .store import Store, remove_tree
-
-LOG_TAIL = 15
+from .store import Store
 
 
 class StepFailed(Exception):
@@ -48,6 +47,10 @@ class Options:
     device: str | None = None
     lock_timeout: float | None = None
     verbose: bool = False
+    jobs: int = 1                   # -j: CPU slots of the local executor (local Ray: its CPUs)
+    executor: str = "local"         # local | ray
+    address: str | None = None      # Ray cluster address (ray executor)
+    retries: int | None = None      # extra attempts per failed step (None: the executor's default)
 
 
 @dataclass
@@ -66,7 +69,7 @@ class Context:
     verbose: bool = False
 
     @classmethod
-    def build(cls, pipe: Pipeline, store: Store, opts: Options) -> "Context":
+    def build(cls, pipe: Pipeline, store: Store, opts: Options, hasher: CodeHasher | None = None) -> "Context":
         resolved = resolve(pipe, opts.profile, opts.sets)
         uses = parse_uses(pipe, opts.uses)
         prompt = opts.prompt
@@ -80,7 +83,7 @@ class Context:
         if device not in ("cpu", "cuda"):
             raise PipelineError(f"device {device!r} (from --device or HOLOFLOW_DEVICE); fix: use cpu, cuda "
                                 f"or auto")
-        hasher = CodeHasher(pipe.root, store.root / "cache" / "code.json")
+        hasher = hasher or CodeHasher(pipe.root, store.root / "cache" / "code.json")
         return cls(pipe, store, resolved, seed, prompt, opts.profile or pipe.default_profile, uses,
                    hasher, device, opts.verbose)
 
@@ -199,118 +202,343 @@ def select(pipe: Pipeline, opts: Options, uses: dict[str, Path]) -> tuple[set[st
 
 
 # -- running -------------------------------------------------------------------------------------
-def run(ctx: Context, opts: Options, display, lock_message=print) -> dict[str, Any]:
-    """Run the pipeline; returns the summary (also what --json prints). Raises StepFailed on failure."""
-    pipe, store = ctx.pipe, ctx.store
-    selected, needed, forced = select(pipe, opts, ctx.uses)
-    order = [n for n in pipe.stages if n in needed]
-    for n in order:
-        if n not in ctx.uses and n in selected:
-            check_files(pipe, n)
+@dataclass
+class Scene:
+    """One scene of a run or batch: its context (prompt, resolved params, seed) and run options."""
+
+    ctx: Context
+    opts: Options
+    label: str = ""                 # "" for a single run; "s1", "s2", ... in a batch
+    sets: list[str] = field(default_factory=list)       # the scene's own --set (for the summary)
+
+
+class _SceneRun:
+    """The state of one scene while the scheduler works through its DAG."""
+
+    def __init__(self, scene: Scene):
+        ctx, opts = scene.ctx, scene.opts
+        self.scene, self.ctx, self.opts = scene, ctx, opts
+        self.selected, self.needed, self.forced = select(ctx.pipe, opts, ctx.uses)
+        self.order = [n for n in ctx.pipe.stages if n in self.needed]
+        self.pending = list(self.order)           # not yet resolved (cached, used, or committed)
+        self.waiting: set[str] = set()            # submitted, or waiting on another scene's same key
+        self.outputs: dict[str, dict] = {}
+        self.ran: set[str] = set()
+        self.run_id: str | None = None
+        self.failed: str | None = None
+        self.t0: dict[str, float] = {}
+        self.summary: dict[str, Any] = {"pipeline": str(ctx.pipe.path), "store": str(ctx.store.root),
+                                        "prompt": ctx.prompt, "profile": ctx.profile, "seed": ctx.seed,
+                                        "stages": {}, "ok": False}
+        if scene.label:
+            self.summary.update(label=scene.label, sets=list(scene.sets))
+
+    def name(self, stage: str) -> str:
+        return f"{self.scene.label}/{stage}" if self.scene.label else stage
+
+
+class _Job:
+    """One step to compute (one cache key), and every scene stage waiting for it."""
+
+    def __init__(self, task: StepTask, waiters: list[tuple[_SceneRun, str]]):
+        self.task = task
+        self.waiters = waiters
+        self.t0 = time.monotonic()
+
+
+def run(ctx: Context, opts: Options, display, lock_message=print, executor=None) -> dict[str, Any]:
+    """Run the pipeline for one scene; returns the summary (also what --json prints).
+
+    Raises StepFailed when a step fails (after its retries); committed steps stay committed.
+    """
+    return run_batch([Scene(ctx, opts)], display, lock_message, executor)["scenes"][0]
+
+
+def run_batch(scenes: list[Scene], display, lock_message=print, executor=None) -> dict[str, Any]:
+    """Run several scenes over one store: independent steps run concurrently on ``executor``.
+
+    Steps of all scenes are resolved in topological order; a step whose key is cached is served, one
+    whose key another scene is already computing waits for that step (scenes share work where keys
+    agree), the rest go to the executor as soon as it has room. A failing step (after ``retries``)
+    stops its scene; the other scenes go on. Returns {ok, seconds, scenes: [summary per scene]}.
+    """
+    first = scenes[0]
+    pipe, store, opts = first.ctx.pipe, first.ctx.store, first.opts
+    states = [_SceneRun(s) for s in scenes]
+    for st in states:
+        for n in st.order:
+            if n not in st.ctx.uses and n in st.selected:
+                check_files(pipe, n)
     if opts.dry_run:
-        return dry_run(ctx, order, selected, forced)
+        return {"dry_run": True, "ok": True,
+                "scenes": [{**dry_run(st.ctx, st.order, st.selected, st.forced),
+                            **({"label": st.scene.label} if st.scene.label else {})} for st in states]}
     store.ensure()
     store.lock(opts.lock_timeout, "run", lock_message)
     try:
         old_handler = signal.signal(signal.SIGTERM, _raise_interrupted)
     except ValueError:          # not the main thread: leave signals to the caller
         old_handler = None
-    summary: dict[str, Any] = {"pipeline": str(pipe.path), "store": str(store.root), "prompt": ctx.prompt,
-                               "profile": ctx.profile, "seed": ctx.seed, "stages": {}, "ok": False}
-    latest = store.run_info(store.latest_run_id()) or {}
-    for name, st in latest.get("stages", {}).items():
-        if st.get("how") == "used" and name in needed and name not in ctx.uses:
-            display.line(f"note: the latest run took {name} from {st.get('source')} (--use); this run "
-                         f"does not: pass --use {name}=... again to keep it")
-    run_id: str | None = None
-    outputs: dict[str, dict] = {}
-    ran: set[str] = set()
+    batch = {"ok": False, "scenes": [st.summary for st in states]}
     t_run = time.monotonic()
+    make = (lambda: executor) if executor is not None else (
+        lambda: make_executor_for(opts, first.ctx.device, display))
+    sched = _Scheduler(states, make, display, opts.retries)
     try:
-        display.start_run(len(order))
-        for i, name in enumerate(order, 1):
-            t0 = time.monotonic()
-            entry: dict[str, Any] = {}
-            if name in ctx.uses:
-                outputs[name] = import_use(ctx, name, ctx.uses[name])
-                entry = {"how": "used", "source": str(ctx.uses[name]), "key": None}
-                ran.add(name)             # downstream of an import is not an early cutoff
-                display.end_step(name, i, len(order), "used", 0.0, f" ({ctx.uses[name]})")
-            else:
-                comp = ctx.components(name, outputs)
-                key = cache_key(comp)
-                rec = store.record(key)
-                ok = rec is not None and store.outputs_ok(rec)
-                if ok and name not in forced:
-                    upstream_ran = any(u in ran for u in pipe.upstream({name}) - {name})
-                    how = "cut off" if upstream_ran else "cached"
-                    display.end_step(name, i, len(order), how, 0.0)
-                elif name not in selected:
-                    why = "; ".join(explain(ctx, name, comp))
-                    raise PipelineError(f"stage '{name}' is needed but has no cached result ({why}); fix: "
-                                        f"run it too (drop --from/--only, or widen --until)")
-                else:
-                    if run_id is None:
-                        run_id = store.new_run_id()
-                        for done in outputs:
-                            store.link_outputs(run_id, done, outputs[done])
-                        _write_run(ctx, summary, outputs, run_id)
-                    display.start_step(name, i, len(order))
-                    rec = execute(ctx, name, comp, key, run_id, outputs, display)
-                    ran.add(name)
-                    how = "ran"
-                    display.end_step(name, i, len(order), how, time.monotonic() - t0,
-                                     _rss_note(rec))
-                outputs[name] = rec["outputs"]
-                entry = {"how": how, "key": key}
-            entry["seconds"] = round(time.monotonic() - t0, 3)
-            entry["outputs"] = {k: v["digest"] for k, v in outputs[name].items()}
-            summary["stages"][name] = entry
-            if run_id is not None:
-                store.link_outputs(run_id, name, outputs[name])
-                _write_run(ctx, summary, outputs, run_id)      # a killed run keeps what it finished
-        summary["ok"] = True
+        sched.warn_dropped_uses()
+        sched.loop()
+        batch["ok"] = all(st.failed is None for st in states)
     finally:
+        if sched.executor_made is not None and sched.executor_made.running():
+            sched.executor_made.abort()
         if old_handler is not None:
             signal.signal(signal.SIGTERM, old_handler)
-        summary["seconds"] = round(time.monotonic() - t_run, 3)
+        seconds = round(time.monotonic() - t_run, 3)
+        batch["seconds"] = seconds
+        if sched.executor_made is not None:
+            batch["executor"] = sched.executor_made.describe()
         try:
-            ctx.hasher.save()
-            _finish_run(ctx, summary, outputs, run_id)
+            if executor is None and sched.executor_made is not None:
+                sched.executor_made.close()
+            first.ctx.hasher.save()
+            for st in states:
+                st.summary["seconds"] = seconds
+                st.summary["ok"] = st.failed is None and not st.pending
+                _finish_run(st, latest=len(states) == 1)
+            if len(states) > 1:
+                _finish_batch(store, states)
         finally:
             store.unlock()
-    return summary
+    failed = [st for st in states if st.failed]
+    if failed:
+        more = f"\n({len(failed) - 1} more scene(s) failed: {', '.join(s.scene.label for s in failed[1:])})" \
+            if len(failed) > 1 else ""
+        err = StepFailed(failed[0].failed + more)
+        err.batch = batch
+        raise err
+    return batch
 
 
-def _finish_run(ctx: Context, summary: dict, outputs: dict[str, dict], run_id: str | None) -> None:
-    """Write the final run.json and move `latest`, unless nothing changed since the latest run."""
-    store = ctx.store
-    if run_id is None:
-        if not summary["stages"]:
+def make_executor_for(opts: Options, device: str, display):
+    """The executor ``opts`` asks for; output lines of a step reach ``display`` when one step runs."""
+    from .executors import make_executor
+
+    def on_line(label: str, line: str) -> None:
+        if line.startswith("@progress "):
+            p = _json_or_none(line[10:])
+            if p and "done" in p and "total" in p and opts.jobs == 1:
+                display.step_progress(label, int(p["done"]), int(p["total"]), str(p.get("what", "")))
+        elif opts.verbose and not line.startswith("@meta "):
+            display.line(f"    {label}| {line}")
+
+    return make_executor(opts.executor, opts.jobs, opts.address, device, on_line=on_line)
+
+
+class _Scheduler:
+    """Resolve steps as their inputs become known; keep the executor busy; commit results to scenes."""
+
+    def __init__(self, states: list[_SceneRun], make_executor, display, retries: int | None):
+        self.states, self.make_executor, self.display, self._retries = states, make_executor, display, retries
+        self.executor_made = None                 # made on the first step to run (a cached run needs none)
+        self.total = sum(len(st.order) for st in states)
+        self.done = 0
+        self.inflight: dict[str, _Job] = {}       # key -> job (queued or running)
+        self.queue: list[_Job] = []               # jobs not yet submitted (in resolution order)
+        self.running: dict[int, _Job] = {}        # executor handle -> job
+        self.forced_done: dict[str, dict] = {}    # forced keys recomputed in this batch -> record
+
+    def warn_dropped_uses(self) -> None:
+        for st in self.states:
+            latest = st.ctx.store.run_info(st.ctx.store.latest_run_id()) or {}
+            for name, s in latest.get("stages", {}).items():
+                if s.get("how") == "used" and name in st.needed and name not in st.ctx.uses:
+                    self.display.line(f"note: the latest run took {name} from {s.get('source')} (--use); "
+                                      f"this run does not: pass --use {name}=... again to keep it")
+
+    @property
+    def executor(self):
+        if self.executor_made is None:
+            self.executor_made = self.make_executor()
+        return self.executor_made
+
+    @property
+    def retries(self) -> int:
+        return self._retries if self._retries is not None else self.executor.default_retries
+
+    def loop(self) -> None:
+        self.display.start_run(self.total)
+        while True:
+            for st in self.states:
+                self.advance(st)
+            while self.queue and self.executor.fits(self.queue[0].task.resources):
+                self.submit(self.queue.pop(0))
+            if not self.running:
+                if self.queue:      # nothing runs and the head does not fit: cannot happen (clamped)
+                    raise RuntimeError(f"step {self.queue[0].task.label} can never be scheduled")
+                return
+            for handle, result in self.executor.wait(timeout=0.5):
+                self.finish(self.running.pop(handle), result)
+
+    def advance(self, st: _SceneRun) -> None:
+        """Resolve every stage of ``st`` whose inputs are known: used, cached, shared, or queued."""
+        if st.failed:
             return
-        latest = store.run_info(store.latest_run_id())
-        same = latest is not None and latest.get("prompt") == ctx.prompt and {
+        pipe, ctx = st.ctx.pipe, st.ctx
+        for name in list(st.pending):
+            if name in st.waiting:
+                continue
+            if name not in ctx.uses and any(u not in st.outputs for u in pipe.stages[name].inputs.values()):
+                continue
+            st.t0.setdefault(name, time.monotonic())
+            if name in ctx.uses:
+                st.outputs[name] = import_use(ctx, name, ctx.uses[name])
+                st.ran.add(name)             # downstream of an import is not an early cutoff
+                self.resolved(st, name, {"how": "used", "source": str(ctx.uses[name]), "key": None},
+                              f" ({ctx.uses[name]})")
+                continue
+            comp = ctx.components(name, st.outputs)
+            key = cache_key(comp)
+            forced = name in st.forced
+            rec = self.forced_done.get(key) if forced else ctx.store.record(key)
+            if rec is not None and ctx.store.outputs_ok(rec):
+                upstream_ran = any(u in st.ran for u in pipe.upstream({name}) - {name})
+                st.outputs[name] = rec["outputs"]
+                self.resolved(st, name, {"how": "cut off" if upstream_ran else "cached", "key": key})
+                continue
+            if name not in st.selected:
+                why = "; ".join(explain(ctx, name, comp))
+                raise PipelineError(f"stage '{name}' is needed but has no cached result ({why}); fix: "
+                                    f"run it too (drop --from/--only, or widen --until)")
+            st.waiting.add(name)
+            if key in self.inflight:
+                self.inflight[key].waiters.append((st, name))
+                continue
+            job = _Job(self.task(st, name, comp, key, forced), [(st, name)])
+            self.inflight[key] = job
+            self.queue.append(job)
+
+    def task(self, st: _SceneRun, name: str, comp: dict, key: str, forced: bool) -> StepTask:
+        ctx, pipe = st.ctx, st.ctx.pipe
+        if st.run_id is None:
+            st.run_id = ctx.store.new_run_id()
+            for done in st.outputs:
+                ctx.store.link_outputs(st.run_id, done, st.outputs[done])
+            _write_run(st, latest=len(self.states) == 1)
+        stage, r = pipe.stages[name], ctx.resolved[name]
+        spec = {"stage": name, "engine": r.engine, "params": r.params, "seed": ctx.seed,
+                "prompt": ctx.prompt or "", "device": ctx.device,
+                "inputs": {inp: str(ctx.store.run_dir(st.run_id) / up) for inp, up in stage.inputs.items()},
+                "key": key, "run": st.run_id}
+        prov = {"run": st.run_id, "engine": r.engine, "params": r.params, "seed": ctx.seed, "device": ctx.device,
+                "inputs": {inp: {"stage": up, "outputs": {k: v["digest"] for k, v in st.outputs[up].items()}}
+                           for inp, up in stage.inputs.items()},
+                "program": stage.run}
+        return StepTask(store=str(ctx.store.root), stage=name, label=st.name(name), key=key, components=comp,
+                        spec=spec, program=str(pipe.program(name)), cwd=str(pipe.root),
+                        resources=r.resources.as_dict(), provenance=prov, replace=forced)
+
+    def submit(self, job: _Job) -> None:
+        owner, name = job.waiters[0]
+        self.display.start_step(job.task.label, self.done + 1, self.total,
+                                f" (attempt {job.task.attempt})" if job.task.attempt > 1 else "")
+        self.running[self.executor.submit(job.task)] = job
+
+    def finish(self, job: _Job, result: dict) -> None:
+        task = job.task
+        if not result.get("ok"):
+            if result.get("aborted"):
+                return
+            where = f" on {result['host']}" if result.get("host") and self.executor.kind != "local" else ""
+            if task.attempt <= self.retries and not result.get("bad_output"):
+                self.display.line(f"{task.label}: attempt {task.attempt} failed ({result['reason']}{where}); "
+                                  f"retrying")
+                task.attempt += 1
+                self.queue.insert(0, job)
+                return
+            del self.inflight[task.key]
+            tries = f" after {task.attempt} attempts" if task.attempt > 1 else ""
+            if result.get("bad_output"):
+                msg = f"stage '{task.label}' {result['reason']}; fix the stage program (log: {result['log']})"
+            else:
+                where_log = f"--- last lines of {result['log']} ---" if result.get("log") else "---"
+                msg = (f"stage '{task.label}' failed ({result['reason']}{where}{tries}); nothing from it was "
+                       f"committed; earlier steps are kept.\n{where_log}\n{result.get('tail', '')}")
+            for st, name in job.waiters:
+                st.failed = st.failed or msg
+                st.waiting.discard(name)
+            return
+        rec = result["record"]
+        del self.inflight[task.key]
+        if task.replace:
+            self.forced_done[task.key] = rec
+        note = _rss_note(rec) + (f" on {result['host']}" if self.executor.kind != "local" else "")
+        for i, (st, name) in enumerate(job.waiters):
+            st.waiting.discard(name)
+            st.outputs[name] = rec["outputs"]
+            if i == 0:
+                st.ran.add(name)
+                self.resolved(st, name, {"how": "ran", "key": task.key}, note, ran=True)
+            else:
+                upstream_ran = any(u in st.ran for u in st.ctx.pipe.upstream({name}) - {name})
+                self.resolved(st, name, {"how": "cut off" if upstream_ran else "cached", "key": task.key})
+
+    def resolved(self, st: _SceneRun, name: str, entry: dict, note: str = "", ran: bool = False) -> None:
+        """``name`` of ``st`` has its outputs: summary entry, run links, display line."""
+        st.pending.remove(name)
+        self.done += 1
+        seconds = time.monotonic() - st.t0[name]
+        self.display.end_step(st.name(name), self.done, self.total, entry["how"], seconds if ran else 0.0, note)
+        entry["seconds"] = round(seconds, 3)
+        entry["outputs"] = {k: v["digest"] for k, v in st.outputs[name].items()}
+        st.summary["stages"][name] = entry
+        if st.run_id is not None:
+            st.ctx.store.link_outputs(st.run_id, name, st.outputs[name])
+            _write_run(st, latest=len(self.states) == 1)      # a killed run keeps what it finished
+
+
+def _finish_run(st: _SceneRun, latest: bool) -> None:
+    """Write the scene's final run.json (and move `latest` if asked), unless nothing changed since the
+    latest run."""
+    store, summary, ctx = st.ctx.store, st.summary, st.ctx
+    if st.run_id is None:
+        if not summary["stages"]:
+            summary["run"] = None
+            return
+        last = store.run_info(store.latest_run_id())
+        same = last is not None and last.get("prompt") == ctx.prompt and {
             n: (s.get("key"), {k: v["digest"] for k, v in s.get("outputs", {}).items()})
-            for n, s in latest.get("stages", {}).items()} == {
+            for n, s in last.get("stages", {}).items()} == {
             n: (e.get("key"), e["outputs"]) for n, e in summary["stages"].items()}
         if same or not summary["ok"]:
             summary["run"] = store.latest_run_id() if same else None
             return
-        run_id = store.new_run_id()
+        st.run_id = store.new_run_id()
         for n in summary["stages"]:
-            store.link_outputs(run_id, n, outputs[n])
-    _write_run(ctx, summary, outputs, run_id)
-    summary["run"] = run_id
+            store.link_outputs(st.run_id, n, st.outputs[n])
+    _write_run(st, latest=latest)
+    summary["run"] = st.run_id
 
 
-def _write_run(ctx: Context, summary: dict, outputs: dict[str, dict], run_id: str) -> None:
-    stages = {n: {"key": e.get("key"), "how": e["how"], "outputs": outputs[n],
+def _finish_batch(store: Store, states: list[_SceneRun]) -> None:
+    """A batch's runs are pinned (gc keeps every scene, not only the latest); `latest` -> the last one."""
+    runs = [st.summary.get("run") for st in states if st.summary.get("run")]
+    for rid in runs:
+        store.pin(rid)
+    if runs:
+        store.write_run(runs[-1], store.run_info(runs[-1]), latest=True)
+
+
+def _write_run(st: _SceneRun, latest: bool) -> None:
+    ctx, summary = st.ctx, st.summary
+    stages = {n: {"key": e.get("key"), "how": e["how"], "outputs": st.outputs[n],
                   **({"source": e["source"]} if "source" in e else {})}
               for n, e in summary["stages"].items()}
-    info = {"run": run_id, "pipeline": str(ctx.pipe.path), "prompt": ctx.prompt, "profile": ctx.profile,
+    info = {"run": st.run_id, "pipeline": str(ctx.pipe.path), "prompt": ctx.prompt, "profile": ctx.profile,
             "seed": ctx.seed, "ok": summary["ok"], "seconds": summary.get("seconds"), "stages": stages,
             "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    ctx.store.write_run(run_id, info, latest=True)
+    if st.scene.label:
+        info.update(label=st.scene.label, sets=list(st.scene.sets))
+    ctx.store.write_run(st.run_id, info, latest=latest)
 
 
 def _raise_interrupted(signum, frame):
@@ -320,117 +548,6 @@ def _raise_interrupted(signum, frame):
 def _rss_note(rec: dict) -> str:
     rss = rec.get("provenance", {}).get("peak_rss_mb")
     return f", peak {rss:.0f} MB" if rss else ""
-
-
-def execute(ctx: Context, name: str, comp: dict, key: str, run_id: str, outputs: dict[str, dict],
-            display) -> dict:
-    """Run one step as a process; on exit 0 commit its outputs and key record; returns the record."""
-    store, pipe = ctx.store, ctx.pipe
-    stage, r = pipe.stages[name], ctx.resolved[name]
-    staging = store.staging(name)
-    out_dir, work_dir = staging / "out", staging / "work"
-    out_dir.mkdir()
-    work_dir.mkdir()
-    spec = {"stage": name, "engine": r.engine, "params": r.params, "seed": ctx.seed,
-            "prompt": ctx.prompt or "", "device": ctx.device,
-            "inputs": {inp: str(store.run_dir(run_id) / up) for inp, up in stage.inputs.items()},
-            "output_dir": str(out_dir), "work_dir": str(work_dir), "key": key, "run": run_id}
-    job = staging / "job.json"
-    job.write_text(json.dumps(spec, indent=1, sort_keys=True))
-    program = pipe.program(name)
-    argv = [sys.executable, str(program), str(job)] if program.suffix == ".py" else [str(program), str(job)]
-    env = dict(os.environ, PYTHONUNBUFFERED="1", HOLOFLOW_STAGE=name)
-    log_path = staging / "log.txt"
-    meta: dict[str, Any] = {}
-    started = time.time()
-    t0 = time.monotonic()
-    import subprocess
-
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, cwd=pipe.root, env=env, preexec_fn=_die_with_parent)
-        try:
-            for raw in proc.stdout:
-                log.write(raw)
-                line = raw.decode(errors="replace").rstrip("\n")
-                if line.startswith("@progress "):
-                    p = _json_or_none(line[10:])
-                    if p and "done" in p and "total" in p:
-                        display.step_progress(name, int(p["done"]), int(p["total"]), str(p.get("what", "")))
-                elif line.startswith("@meta "):
-                    m = _json_or_none(line[6:])
-                    if isinstance(m, dict):
-                        meta.update(m)
-                elif ctx.verbose:
-                    display.line(f"    {name}| {line}")
-            _, status, usage = os.wait4(proc.pid, 0)
-            proc.returncode = code = os.waitstatus_to_exitcode(status)
-        except BaseException:
-            proc.kill()
-            proc.wait()
-            remove_tree(staging)
-            raise
-    wall = time.monotonic() - t0
-    if code != 0:
-        kept = _keep_failed_log(store, run_id, name, log_path)
-        remove_tree(staging)
-        reason = f"killed by signal {-code}" if code < 0 else f"exit code {code}"
-        tail = _tail(kept, LOG_TAIL)
-        raise StepFailed(f"stage '{name}' failed ({reason}); nothing from it was committed; earlier steps "
-                         f"are kept.\n--- last lines of {kept} ---\n{tail}")
-    files = sorted(p for p in out_dir.rglob("*") if not p.is_dir())
-    bad = [p for p in files if p.is_symlink() or not p.is_file()]
-    if bad or not files:
-        kept = _keep_failed_log(store, run_id, name, log_path)
-        remove_tree(staging)
-        what = f"wrote a non-regular file {bad[0].relative_to(out_dir)}" if bad else "wrote no output files"
-        raise StepFailed(f"stage '{name}' {what}; fix the stage program (log: {kept})")
-    committed = {p.relative_to(out_dir).as_posix(): store.put(p) for p in files}
-    log_entry = store.put(log_path)
-    import platform
-
-    versions = {"python": platform.python_version(), "holoflow": __version__, "platform": platform.platform()}
-    versions.update(meta.pop("versions", {}) if isinstance(meta.get("versions"), dict) else {})
-    if "torch" in meta:
-        versions["torch"] = meta["torch"]
-    rec = {
-        "key": key, "stage": name, "components": comp, "outputs": committed,
-        "provenance": {
-            "run": run_id, "engine": r.engine, "params": r.params, "seed": ctx.seed, "device": ctx.device,
-            "inputs": {inp: {"stage": up, "outputs": {k: v["digest"] for k, v in outputs[up].items()}}
-                       for inp, up in stage.inputs.items()},
-            "program": stage.run, "argv0": Path(argv[0]).name, "meta": meta, "versions": versions,
-            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(started)),
-            "wall_s": round(wall, 3), "cpu_s": round(usage.ru_utime + usage.ru_stime, 3),
-            "peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "exit_code": code,
-            "log": log_entry["digest"], "log_size": log_entry["size"],
-        },
-    }
-    store.write_record(rec)
-    remove_tree(staging)
-    return rec
-
-
-def _die_with_parent() -> None:
-    """In the child: die if the runner dies (a SIGKILLed runner leaves no orphan step behind)."""
-    try:
-        import ctypes
-
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)    # PR_SET_PDEATHSIG
-    except OSError:
-        pass
-
-
-def _keep_failed_log(store: Store, run_id: str, name: str, log_path: Path) -> Path:
-    dest = store.root / "logs" / f"{run_id}-{name}.log"
-    dest.parent.mkdir(exist_ok=True)
-    shutil.copyfile(log_path, dest)
-    return dest
-
-
-def _tail(path: Path, n: int) -> str:
-    lines = [ln for ln in path.read_text(errors="replace").splitlines() if not ln.startswith("@progress ")]
-    return "\n".join(lines[-n:]) if lines else "(the step printed nothing)"
 
 
 def _json_or_none(text: str):
@@ -490,7 +607,7 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
         if rec is not None:
             missing = [rel for rel, e in rec["outputs"].items() if not store.check(e)]
             if not missing:
-                out[name] = {"state": "fresh", "reasons": [], "key": key}
+                out[name] = {"state": "fresh", "reasons": [], "key": key, "ran": ran_info(rec)}
                 outputs[name] = rec["outputs"]
                 continue
             out[name] = {"state": "missing", "key": key,
@@ -501,6 +618,30 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
                      "key": key}
     ctx.hasher.save()
     return out
+
+
+def ran_info(rec: dict) -> dict[str, Any]:
+    """Where and with what a recorded step ran: host, executor, declared resources, wall, peak memory."""
+    prov = rec.get("provenance", {})
+    return {k: prov.get(k) for k in ("host", "executor", "resources", "attempt", "wall_s", "peak_rss_mb")}
+
+
+def describe_ran(info: dict[str, Any] | None) -> str:
+    """``ran_info`` in words: 'on vm (local; 1 cpu, 2 GB; 3.1 s, peak 210 MB)'."""
+    if not info or not info.get("host"):
+        return ""
+    res = info.get("resources") or {}
+    want = [f"{res.get('cpus', 1)} cpu"]
+    if res.get("gpus"):
+        want.append(f"{res['gpus']} gpu" + (f" #{res['gpu_ids']}" if res.get("gpu_ids") else ""))
+    if res.get("memory_gb"):
+        want.append(f"{res['memory_gb']:g} GB")
+    used = [f"{info['wall_s']:.1f} s"] if info.get("wall_s") is not None else []
+    if info.get("peak_rss_mb"):
+        used.append(f"peak {info['peak_rss_mb']:.0f} MB")
+    if (info.get("attempt") or 1) > 1:
+        used.append(f"attempt {info['attempt']}")
+    return f"on {info['host']} ({info.get('executor') or 'local'}; {', '.join(want)}; {', '.join(used)})"
 
 
 def explain(ctx: Context, name: str, comp: dict) -> list[str]:

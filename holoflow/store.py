@@ -15,9 +15,14 @@ Layout under the store root::
     cache/pipeline.json       the parsed pipeline.yaml, keyed by its (path, size, mtime_ns)
     lock                      fcntl.flock held by `run` and `gc --yes`
 
-Crash safety: an object appears only through ``os.replace`` of a complete, fsynced file; a key record
-is written (tmp + fsync + replace) after all its objects exist. A SIGKILL at any moment leaves at worst
-stray files in tmp/, which the next locked operation removes.
+Crash safety: an object appears only through a hard link (else ``os.replace``) of a complete, fsynced
+file; a key record is written (tmp + fsync + link) after all its objects exist. A SIGKILL at any moment
+leaves at worst stray files in tmp/, which the next locked operation removes.
+
+Concurrent commits (threads of `run -j N`, Ray workers on several hosts sharing the store): temporary
+names are unique per writer, and both objects and key records are created with ``os.link``, which never
+replaces an existing name: when several workers finish the same key at once the first commit wins and
+the others adopt it (an object's bytes are identical by construction: its name is their hash).
 """
 from __future__ import annotations
 
@@ -59,12 +64,37 @@ def sha256_file(path: str | Path) -> str:
 
 def write_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` so that readers see the old or the new file, never a partial one."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "w") as f:
+    os.replace(_write_tmp(path, text), path)
+
+
+def _write_tmp(path: Path, text: str) -> Path:
+    """A complete, fsynced sibling of ``path`` under a name unique to this writer (host, pid, random)."""
+    tmp = path.with_name(f".{path.name}.{os.uname().nodename}.{os.getpid()}.{os.urandom(4).hex()}.tmp")
+    with open(tmp, "x") as f:
         f.write(text)
         f.flush()
         os.fsync(f.fileno())
-    os.replace(tmp, path)
+    return tmp
+
+
+def link_or_replace(src: Path, dest: Path) -> bool:
+    """Give ``src``'s file the name ``dest`` unless ``dest`` exists (first wins); ``src`` is gone after.
+
+    Returns True if this call created ``dest``. On a filesystem without hard links it falls back to
+    ``os.replace`` (last wins; callers only use it where every contender writes the same bytes).
+    """
+    try:
+        os.link(src, dest)
+    except FileExistsError:
+        os.unlink(src)
+        return False
+    except OSError as e:
+        if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
+            raise
+        os.replace(src, dest)
+        return True
+    os.unlink(src)
+    return True
 
 
 def read_json(path: Path) -> dict | None:
@@ -172,7 +202,7 @@ class Store:
             pass
         dest.parent.mkdir(exist_ok=True)
         os.chmod(src, 0o444)
-        os.replace(src, dest)
+        link_or_replace(src, dest)      # another worker may have committed the same bytes meanwhile
         st = dest.stat()
         return {"digest": digest, "size": st.st_size, "mtime_ns": st.st_mtime_ns}
 
@@ -218,9 +248,24 @@ class Store:
     def record(self, key: str) -> dict | None:
         return read_json(self.key_path(key))
 
-    def write_record(self, rec: dict) -> None:
-        write_atomic(self.key_path(rec["key"]), json.dumps(rec, indent=1, sort_keys=True))
+    def write_record(self, rec: dict, replace: bool = True) -> dict:
+        """Commit a key record; returns the record now in force.
+
+        ``replace=False`` (a normal step): if an intact record for the key is already committed (another
+        worker finished the same key first), that one is kept and returned. ``replace=True`` (--force)
+        always installs ``rec``.
+        """
+        path = self.key_path(rec["key"])
+        tmp = _write_tmp(path, json.dumps(rec, indent=1, sort_keys=True))
+        if replace:
+            os.replace(tmp, path)
+        elif not link_or_replace(tmp, path):
+            existing = self.record(rec["key"])
+            if existing is not None and self.outputs_ok(existing):
+                return existing
+            write_atomic(path, json.dumps(rec, indent=1, sort_keys=True))     # the old one was damaged
         write_atomic(self.root / "stages" / f"{rec['stage']}.json", json.dumps({"key": rec["key"]}))
+        return rec
 
     def last_key(self, stage: str) -> str | None:
         rec = read_json(self.root / "stages" / f"{stage}.json")

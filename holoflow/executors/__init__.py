@@ -1,0 +1,91 @@
+"""Executors: where the steps of a run (or a batch of runs) execute.
+
+The runner (holoflow/runner.py) decides WHAT runs: it resolves cache keys, serves cached steps and
+hands every step that must run to an executor as a :class:`StepTask`. An executor decides WHERE and
+WHEN, within the resources each stage declares in pipeline.yaml (``resources: {cpus, gpus,
+memory_gb}``); it never changes what a step computes. Every step still runs as its own process
+(holoflow.executors.step.run_step), which commits its outputs to the shared store itself.
+
+- ``local`` (holoflow.executors.local): up to ``-j N`` CPU slots on this machine, one slot per GPU.
+- ``ray`` (holoflow.executors.ray_executor): one Ray task per step, requesting the stage's resources
+  from a Ray cluster (a local one, or ``--address`` of an existing cluster).
+
+Interface (both): ``fits(resources)``, ``submit(task) -> handle``, ``wait(timeout) -> [(handle,
+result)]``, ``abort()``, ``close()``, plus ``kind``, ``default_retries`` and ``describe()``.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS",
+               "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+
+@dataclass
+class StepTask:
+    """Everything a worker needs to run and commit one step (plain data: it is pickled for Ray)."""
+
+    store: str                      # store root, absolute; the same path on every worker
+    stage: str
+    label: str                      # display name ("detail", or "s2/detail" in a batch)
+    key: str
+    components: dict[str, Any]
+    spec: dict[str, Any]            # the job spec, less output_dir/work_dir (made by the worker)
+    program: str                    # absolute path; a .py runs with the worker's own python
+    cwd: str
+    resources: dict[str, Any]       # the stage's declared {cpus, gpus, memory_gb}
+    provenance: dict[str, Any]      # facts known before the step runs (engine, params, inputs ...)
+    replace: bool = False           # --force: install the new record even if one exists
+    attempt: int = 1
+    env: dict[str, str] = field(default_factory=dict)
+
+
+def step_env(resources: dict[str, Any]) -> dict[str, str]:
+    """Thread-count variables for a step: its declared cpus, capped at this host's cores.
+
+    The same on every executor, so a step computes the same bytes under ``-j 1``, ``-j N`` and Ray.
+    """
+    n = str(max(1, min(int(resources.get("cpus", 1)), os.cpu_count() or 1)))
+    return {v: n for v in THREAD_VARS}
+
+
+def gpu_ids() -> list[str]:
+    """GPUs this process may use: $CUDA_VISIBLE_DEVICES if set, else /dev/nvidiaN (no torch import)."""
+    vis = os.environ.get("CUDA_VISIBLE_DEVICES")
+    if vis is not None:
+        return [g.strip() for g in vis.split(",") if g.strip() and g.strip() != "-1"]
+    try:
+        return sorted((n[6:] for n in os.listdir("/dev") if n.startswith("nvidia") and n[6:].isdigit()), key=int)
+    except OSError:
+        return []
+
+
+def host_memory_gb() -> float:
+    """Total memory of this host, GiB (from /proc/meminfo; 0 when unknown)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemTotal:"):
+                    return int(line.split()[1]) / 2**20
+    except OSError:
+        pass
+    return 0.0
+
+
+def make_executor(kind: str, jobs: int = 1, address: str | None = None, device: str = "cpu",
+                  on_line=None):
+    """The executor named ``kind`` (local | ray). ``on_line(label, line)`` gets each step's output lines
+    (local only; called on the thread that calls ``wait``)."""
+    if kind == "local":
+        from .local import LocalExecutor
+
+        return LocalExecutor(jobs, device=device, on_line=on_line)
+    if kind == "ray":
+        from .ray_executor import RayExecutor
+
+        return RayExecutor(address=address, jobs=jobs, device=device)
+    from ..pipeline import PipelineError
+
+    raise PipelineError(f"--executor {kind!r}: unknown executor; fix: use local or ray")
