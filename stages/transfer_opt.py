@@ -26,12 +26,14 @@ def main() -> int:
                                    progress=lambda d, n: job.progress(d, n, "iters"))
     model.save_ply(job.output("scene.ply"))
     log["fit"] = {"pano": score_views(model, pano_views, job.engine)}     # G1 at the base cameras
+    seconds = log.pop("seconds")                                         # wall time: meta, not the artifact
     job.output("train_log.json").write_text(dumps_log(log))
     write_previews(model, job.output_dir / "previews", pano_views[0]["K"], job.engine,
                    size=int(p.get("preview_size", 128)))
     last = log["phases"][-1]["train"] if log["phases"] else {}
     job.meta(gaussians=len(model), final_loss=last["loss"][-1] if last.get("loss") else None,
-             psnr_pano=log["fit"]["pano"]["psnr"], ssim_pano=log["fit"]["pano"]["ssim"], backend=job.engine)
+             psnr_pano=log["fit"]["pano"]["psnr"], ssim_pano=log["fit"]["pano"]["ssim"], backend=job.engine,
+             phase_seconds=seconds)
     return 0
 
 

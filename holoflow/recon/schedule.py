@@ -56,12 +56,14 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, b
                progress: Progress | None = None) -> dict:
     """Train ``model`` in place through ``phases`` = [(name, views, iterations)], in order; phases with
     0 iterations are skipped. ``progress(done, total)`` counts iterations over all phases.
-    Returns the log: per phase the trainer's log, wall seconds, Gaussian count after it."""
+    Returns the log: per phase the trainer's log and the Gaussian count after it; wall seconds per
+    phase under ``log["seconds"]`` ({phase: s}), kept apart so a caller can move them out of an
+    artifact (stages put them in the key record's meta: train_log.json stays byte-deterministic)."""
     from holoflow.splat import train
 
     total = sum(max(0, n) for _, _, n in phases)
     done = 0
-    log: dict = {"phases": [], "total_iterations": total}
+    log: dict = {"phases": [], "total_iterations": total, "seconds": {}}
     for i, (name, views, iters) in enumerate(phases):
         if iters <= 0:
             continue
@@ -77,8 +79,9 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, b
         tlog = train(model, views, train_config(iters, params, backend), progress=phase_progress,
                      seed=seed + 1000 * i)
         done += iters
+        tlog.pop("time_s", None)
+        log["seconds"][name] = round(time.perf_counter() - t0, 3)
         log["phases"].append(dict(name=name, iterations=iters, views=len(views),
-                                  seconds=round(time.perf_counter() - t0, 3),
                                   gaussians=int(model.means.shape[0]), train=tlog))
     return log
 
@@ -107,14 +110,15 @@ def transfer_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pano_views: list[dict
 
 
 @torch.no_grad()
-def render_views(model, views: list[dict], backend: str, chunk: int = 8) -> tuple[torch.Tensor, torch.Tensor]:
+def render_views(model, views: list[dict], backend: str, chunk: int = 8, with_depth: bool = False):
     """Render ``model`` at every view's camera (all views share one image size).
-    Returns rgb [C, H, W, 3] (sRGB, clamped to [0, 1]) and alpha [C, H, W, 1]."""
+    Returns rgb [C, H, W, 3] (sRGB, clamped to [0, 1]) and alpha [C, H, W, 1]; with ``with_depth``
+    also the expected camera z [C, H, W, 1] in metres (accumulated depth / alpha; 0 where alpha is 0)."""
     from holoflow.splat import render
 
     h, w = views[0]["image"].shape[:2]
     dev = model.means.device
-    rgbs, alphas = [], []
+    rgbs, alphas, depths = [], [], []
     for s in range(0, len(views), chunk):
         part = views[s:s + chunk]
         vm = torch.stack([v["viewmat"] for v in part]).to(dev)
@@ -122,6 +126,9 @@ def render_views(model, views: list[dict], backend: str, chunk: int = 8) -> tupl
         out = render(model, vm, K, w, h, backend=backend)
         rgbs.append(out["rgb"].clamp(0, 1).cpu())
         alphas.append(out["alpha"].cpu())
+        depths.append((out["depth"] / out["alpha"].clamp_min(1e-6)).where(out["alpha"] > 0, 0.0).cpu())
+    if with_depth:
+        return torch.cat(rgbs), torch.cat(alphas), torch.cat(depths)
     return torch.cat(rgbs), torch.cat(alphas)
 
 
