@@ -35,12 +35,49 @@ VARIANTS = {
 MAX_OFFSET_M = 1.0      # novel cameras: at most this far from the centre (metres)
 
 
-def novel_cameras(scene, n: int, offset: float, seed: int) -> "torch.Tensor":
-    """n seeded random cameras off the centre, viewmats [n, 4, 4].
+def hidden_from_centre(scene, origins, dirs) -> "torch.Tensor":
+    """[N] bool: the surface seen along each ray (origins [N, 3] m, unit dirs [N, 3], world) is
+    hidden from the panorama centre (the world origin), i.e. the panorama never saw it.
 
-    Each eye lies along a random direction u at a uniform random fraction in [0, offset] of the free
-    distance from the centre to the first surface along u (capped at MAX_OFFSET_M), so it is inside
-    the scene's free space; each looks along an independent direction uniform on the sphere."""
+    A finite hit X is hidden when the ray from the centre towards X stops more than 1 cm + 0.2 % of
+    |X| short of it; a sky ray (no hit) is hidden when the centre's ray in the same direction hits
+    something (sky is at infinity, so direction alone decides)."""
+    import torch
+
+    from holoflow.scene import cast
+
+    t = cast(scene, origins, dirs)[1].double()                                  # [N]
+    sky = ~torch.isfinite(t)
+    x = origins.double() + torch.nan_to_num(t, posinf=0.0)[:, None] * dirs.double()   # [N, 3] hit points
+    r = x.norm(dim=1)                                                           # [N] m from the centre
+    u = torch.where(sky[:, None] | (r[:, None] < 1e-9), dirs.double(), x / r.clamp_min(1e-9)[:, None])
+    tc = cast(scene, torch.zeros_like(u), u)[1].double()                         # [N]
+    return torch.where(sky, torch.isfinite(tc), tc < r * (1 - 2e-3) - 1e-2)
+
+
+def hidden_masks(scene, viewmats, K, width: int, height: int) -> "torch.Tensor":
+    """Per pixel of each camera, whether its surface is hidden from the centre: [C, H, W] bool
+    (pixel-centre rays; see ``hidden_from_centre``)."""
+    import torch
+
+    from holoflow.geometry.camera import pinhole_rays
+
+    o, d = pinhole_rays(K.double(), viewmats.double(), height, width)           # [C, H, W, 3] each
+    return hidden_from_centre(scene, o.reshape(-1, 3), d.reshape(-1, 3)).reshape(len(viewmats), height, width)
+
+
+def novel_cameras(scene, n: int, offset: float, seed: int, K=None, candidates: int = 16,
+                  probe: int = 16) -> "torch.Tensor":
+    """n seeded novel cameras off the centre that look at what the panorama could not see, viewmats
+    [n, 4, 4].
+
+    Each eye lies along a random direction u at a uniform random fraction in [offset / 2, offset] of
+    the free distance from the centre to the first surface along u (capped at MAX_OFFSET_M), so it is
+    inside the scene's free space and really off the base cameras' position. Its view direction is
+    the one of ``candidates`` seeded directions (uniform on the sphere) whose ``probe`` x ``probe``
+    pixel view (intrinsics K [3, 3] rescaled; None = 90 deg field of view) shows the largest fraction
+    of surface hidden from the centre (first candidate on ties): novel-view scores then measure the
+    disocclusions the INP set exists for, not only surfaces the panorama already saw."""
     import torch
 
     from holoflow.geometry.camera import look_at
@@ -48,12 +85,19 @@ def novel_cameras(scene, n: int, offset: float, seed: int) -> "torch.Tensor":
 
     g = torch.Generator().manual_seed(seed)
     u = torch.nn.functional.normalize(torch.randn(n, 3, generator=g, dtype=torch.float64), dim=1)
-    look = torch.nn.functional.normalize(torch.randn(n, 3, generator=g, dtype=torch.float64), dim=1)
-    frac = torch.rand(n, generator=g, dtype=torch.float64) * offset
+    frac = (0.5 + 0.5 * torch.rand(n, generator=g, dtype=torch.float64)) * offset
+    look = torch.nn.functional.normalize(torch.randn(n, candidates, 3, generator=g, dtype=torch.float64), dim=2)
     free = cast(scene, torch.zeros(n, 3), u.float())[1].double()                 # [n] metres (inf = sky)
     dist = torch.minimum(frac * torch.nan_to_num(free, posinf=1e9), torch.full_like(frac, MAX_OFFSET_M))
     eyes = u * dist[:, None]                                                     # [n, 3]
-    return look_at(eyes, eyes + look).float()
+    Kp = torch.tensor([[probe / 2, 0, probe / 2], [0, probe / 2, probe / 2], [0, 0, 1]], dtype=torch.float64)
+    if K is not None:
+        Kp = K.double() * (probe / (2 * float(K[0, 2])))
+        Kp[2, 2] = 1.0
+    vms = look_at(eyes[:, None].expand(n, candidates, 3), eyes[:, None] + look)     # [n, candidates, 4, 4]
+    hidden = hidden_masks(scene, vms.reshape(-1, 4, 4), Kp, probe, probe).flatten(1).double().mean(1)
+    pick = hidden.reshape(n, candidates).argmax(1)                               # [n] first on ties
+    return vms[torch.arange(n), pick].float()
 
 
 def true_views(scene, viewmats, K, width: int, height: int, samples: int = 2,
@@ -77,9 +121,11 @@ def true_views(scene, viewmats, K, width: int, height: int, samples: int = 2,
     return linear_to_srgb(torch.stack(out))
 
 
-def score(model, viewmats, K, targets, backend: str, iqa_dir=None) -> tuple[dict, "torch.Tensor"]:
+def score(model, viewmats, K, targets, backend: str, iqa_dir=None, hidden=None) -> tuple[dict, "torch.Tensor"]:
     """PSNR / SSIM / empty fraction (and BRISQUE where available) of ``model`` rendered at the cameras
-    against targets [C, H, W, 3] sRGB. Returns (scores, renders [C, H, W, 3])."""
+    against targets [C, H, W, 3] sRGB; with ``hidden`` [C, H, W] bool (surface hidden from the
+    centre) also ``hidden_psnr`` (PSNR over those pixels only, pooled), ``hidden_frac`` (their share)
+    and ``hidden_empty``. Returns (scores, renders [C, H, W, 3])."""
     from holoflow import metrics
     from holoflow.recon.schedule import render_views
 
@@ -87,6 +133,9 @@ def score(model, viewmats, K, targets, backend: str, iqa_dir=None) -> tuple[dict
     rgb, alpha = render_views(model, views, backend)
     out = dict(psnr=metrics.psnr(rgb, targets), ssim=metrics.ssim(rgb, targets),
                empty=metrics.empty_fraction(alpha))
+    if hidden is not None:
+        out.update(hidden_psnr=metrics.psnr(rgb, targets, hidden), hidden_frac=float(hidden.double().mean()),
+                   hidden_empty=float(((alpha[..., 0] < 0.5) & hidden).double().sum() / max(int(hidden.sum()), 1)))
     if metrics.availability(iqa_dir)["brisque"] == "available":
         out["brisque"] = sum(metrics.brisque(x, iqa_dir) for x in rgb) / len(rgb)
     return out, rgb
@@ -115,15 +164,17 @@ def evaluate_run(run_dir: Path, novel: int, offset: float, supp: int, seed: int,
     if 0 < supp < len(supp_vm):
         pick = torch.randperm(len(supp_vm), generator=torch.Generator().manual_seed(seed))[:supp]
         supp_vm = supp_vm[pick.sort().values]
-    novel_vm = novel_cameras(scene, novel, offset, seed)
+    novel_vm = novel_cameras(scene, novel, offset, seed, K)
     supp_tgt = true_views(scene, supp_vm, K, w, h, cache=cache)
     novel_tgt = true_views(scene, novel_vm, K, w, h, cache=cache)
-    result, renders = {}, {"truth": novel_tgt}
+    supp_hidden = hidden_masks(scene, supp_vm, K, w, h)
+    novel_hidden = hidden_masks(scene, novel_vm, K, w, h)
+    result, renders = {}, {"truth": novel_tgt, "hidden": novel_hidden}
     for tag, stage, file in (("G0", "pre_opt", "gaussians.ply"), ("G1", "transfer_opt", "scene.ply")):
         model = GaussianModel.load_ply(run_dir / stage / file)
         base, _ = score(model, base_vm, K, base_tgt, backend)
-        sup, _ = score(model, supp_vm, K, supp_tgt, backend, iqa_dir)
-        nov, renders[tag] = score(model, novel_vm, K, novel_tgt, backend, iqa_dir)
+        sup, _ = score(model, supp_vm, K, supp_tgt, backend, iqa_dir, supp_hidden)
+        nov, renders[tag] = score(model, novel_vm, K, novel_tgt, backend, iqa_dir, novel_hidden)
         result[tag] = dict(gaussians=len(model), base=base, supp=sup, novel=nov)
     result["_renders"] = renders
     return result

@@ -4,9 +4,6 @@ views/NNN_K.exr (R,G,B inpainted, linear; A = 1 observed, 0 inpainted), renders/
 before inpainting: R,G,B + A = rendered alpha, for inspection), cameras.json, transforms.json."""
 from __future__ import annotations
 
-import json
-import sys
-
 
 def main() -> int:
     from holoflow.stage import Job
@@ -23,12 +20,11 @@ def main() -> int:
     p = job.params
     model = GaussianModel.load_ply(job.input_file("gaussians", "gaussians.ply"))
     views, cams = load_view_set(job.input("pcd"), alpha_is_mask=True)
-    rgb, alpha = render_views(model, views, backend="auto")               # [N, H, W, 3], [N, H, W, 1]
-    rgb, alpha = rgb.numpy(), alpha[..., 0].numpy()
+    rgb, alpha, depth = render_views(model, views, "auto", with_depth=True)   # [N, H, W, 3], 2 x [N, H, W, 1]
+    rgb, alpha, depth = rgb.numpy(), alpha[..., 0].numpy(), depth[..., 0].numpy()
     pcd_valid = torch.stack([v["mask"] for v in views]).numpy()            # [N, H, W]
     missing = missing_mask(alpha, pcd_valid, float(p["alpha_threshold"]))
-    filled = inpaint_views(rgb, missing, job.engine, p, job.device,
-                           progress=job.progress)
+    filled = inpaint_views(rgb, missing, job.engine, p, job.device, progress=job.progress, depths=depth)
     write_view_set(job.output_dir, cams, filled, (~missing).astype(np.float32), "inp_set")
     write_images(job.output_dir, [v["file"].replace("views/", "renders/", 1) for v in cams["views"]],
                  rgb, alpha, "inp_set")
@@ -40,9 +36,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    from holoflow.engines.weights import MissingWeights
+    from holoflow.stage import run_main
 
-    try:
-        sys.exit(main())
-    except (ValueError, json.JSONDecodeError, MissingWeights) as exc:
-        sys.exit(f"inp_set: {str(exc).splitlines()[0]}")
+    run_main(main, "inp_set")

@@ -6,7 +6,6 @@ RMSE and delta1 of the result (docs/depth.md)."""
 from __future__ import annotations
 
 import json
-import sys
 
 
 def main() -> int:
@@ -25,7 +24,7 @@ def main() -> int:
         disparity, pano, truth, job.engine, n_faces=int(p["faces"]), face_size=int(p["face_size"]),
         padding=float(p.get("padding", 0.3)), seed=job.seed, max_depth=float(p.get("max_depth", 3000.0)),
         huber=float(p.get("huber", 0.05)), model=str(p.get("model", "")), device=job.device,
-        progress=lambda d, n: job.progress(d, n, "faces"))
+        progress=job.progress)
     write_exr(job.output("depth.exr"), {"Z": result.depth},
               {"holoflow.stage": "metric_align", "holoflow.depth_kind": "radial", "holoflow.engine": job.engine,
                "holoflow.simulation": int(bool(result.engine.get("simulation")))})
@@ -37,16 +36,8 @@ def main() -> int:
     return 0
 
 
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from holoflow.engines.weights import MissingWeights
-
-    return (ValueError, OSError, ImportError, MissingWeights)
-
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except Exception as exc:  # a user mistake ends in one line; anything else keeps its traceback
-        if isinstance(exc, _user_errors()):
-            sys.exit(f"metric_align: {exc}")
-        raise
+    from holoflow.stage import run_main
+
+    run_main(main, "metric_align")

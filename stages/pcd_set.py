@@ -7,7 +7,11 @@ towards the base view's axis. P_s (point_cloud's ps.ply) is projected into each 
 nearest point wins, each point covering (2 R - 1)^2 pixels: R = ``splat_radius``, or with 0 (auto) each
 point's own footprint (holoflow.geometry.pointcloud.footprint_radius, from P_s's angular step
 2 pi / width, width = sqrt(2 N) since P_s keeps every pixel of its width x width/2 grid), so the
-missing pixels are disocclusions rather than sampling gaps. Writes views/NNN_K.exr
+missing pixels are disocclusions rather than sampling gaps. Points of P_s on occlusion edges (relative
+depth gradient over ``edge_threshold``, the measure point_cloud filters P_f with; 0 = keep all) are left
+out: P_s is made from the unfiltered P0, so its edge points are the depth-mixed "rubber sheet" between
+a foreground object and what lies behind it, which would otherwise paint the disocclusion with smeared
+colour and hide it from the mask. Writes views/NNN_K.exr
 (R,G,B linear; A = 1 where a point landed, 0 = missing; K = 0 above, 1 below, 2 left, 3 right),
 cameras.json (kind "supplementary", base = base camera index) and transforms.json.
 """
@@ -15,7 +19,6 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 
 
 def main() -> int:
@@ -28,7 +31,7 @@ def main() -> int:
     torch.set_num_threads(max(1, (os.cpu_count() or 2) // 2))  # spinning workers cost more than they bring on shared cores
 
     from holoflow.geometry.export import cameras_json, cameras_tensors, read_cameras, write_cameras, write_transforms
-    from holoflow.geometry.pointcloud import footprint_radius, project_points_zbuffer
+    from holoflow.geometry.pointcloud import depth_gradient, footprint_radius, project_points_zbuffer
     from holoflow.geometry.rigs import SUPPLEMENTARY, supplementary_rig
     from holoflow.io.exr import write_rgb
     from holoflow.io.ply import read_points
@@ -46,6 +49,15 @@ def main() -> int:
     W, H = int(base["width"]), int(base["height"])
     pts = torch.from_numpy(xyz).to(device).double()  # [N, 3]
     srgb = torch.from_numpy(rgb8).to(device).float() / 255.0  # [N, 3]
+    edge = float(p.get("edge_threshold", 0.0))
+    if edge > 0:  # P_s is a full equirect grid, row-major: width = sqrt(2 N)
+        w = int(round(math.sqrt(2 * len(xyz))))
+        if w * (w // 2) != len(xyz):
+            raise ValueError(f"ps.ply: {len(xyz)} points are not a full equirect grid (edge_threshold needs one)")
+        grad = depth_gradient(torch.linalg.vector_norm(pts, dim=-1).reshape(w // 2, w))  # [H, W]
+        keep = (torch.nan_to_num(grad, nan=float("inf")) <= edge).reshape(-1)  # [N]
+        pts, srgb = pts[keep], srgb[keep]
+    n_edge = len(xyz) - len(pts)
     linear = kornia.color.rgb_to_linear_rgb(srgb.T[:, :, None])[:, :, 0].T  # [N, 3] linear light
     M = base_V.shape[0]
     spacing = 2.0 * math.pi / math.sqrt(2.0 * len(xyz))  # P_s's angular step, radians
@@ -76,14 +88,14 @@ def main() -> int:
     cams = cameras_json(K, sup, W, H, names, files, kinds=["supplementary"] * (4 * M), bases=bases)
     write_cameras(job.output("cameras.json"), cams)
     write_transforms(job.output("transforms.json"), cams)
-    job.meta(views=4 * M, points=int(len(xyz)), missing_fraction=round(sum(missing) / len(missing), 6),
+    job.meta(views=4 * M, points=int(len(xyz)), edge_points_dropped=n_edge,
+             missing_fraction=round(sum(missing) / len(missing), 6),
              splat_radius=radius if radius > 0 else "auto",
              median_depth=[round(m, 4) for m in medians])
     return 0
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except (ValueError, OSError) as exc:  # a user mistake ends in one line
-        sys.exit(f"pcd_set: {exc}")
+    from holoflow.stage import run_main
+
+    run_main(main, "pcd_set")

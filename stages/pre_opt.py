@@ -2,9 +2,6 @@
 point landed on), then on the PANO set; writes G0 (gaussians.ply, 3DGS layout) and train_log.json."""
 from __future__ import annotations
 
-import json
-import sys
-
 
 def main() -> int:
     from holoflow.stage import Job
@@ -17,7 +14,7 @@ def main() -> int:
     p = job.params
     for key in ("pcd_iters", "pano_iters"):
         if int(p[key]) < 0:
-            raise SystemExit(f"pre_opt: {key} must be >= 0, got {p[key]}")
+            raise ValueError(f"{key} must be >= 0, got {p[key]}")
     xyz, rgb = read_points(job.input_file("cloud", "pf.ply"))
     pcd_views, _ = load_view_set(job.input("pcd"), alpha_is_mask=True)
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
@@ -35,7 +32,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except (ValueError, json.JSONDecodeError) as exc:
-        sys.exit(f"pre_opt: {exc}")
+    from holoflow.stage import run_main
+
+    run_main(main, "pre_opt")

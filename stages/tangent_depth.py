@@ -7,7 +7,6 @@ best global scale + offset (docs/depth.md)."""
 from __future__ import annotations
 
 import json
-import sys
 
 
 def main() -> int:
@@ -26,8 +25,8 @@ def main() -> int:
     result = pd.estimate_disparity(
         pano, truth, job.engine, face_size=int(p["face_size"]), padding=float(p["padding"]),
         method=str(p.get("align", "grid")), grid=tuple(p["grid"]), smoothness=float(p["smoothness"]),
-        scale_reg=float(p["scale_reg"]), seed=job.seed, model=str(p.get("model", "")), device=job.device,
-        progress=lambda d, n: job.progress(d, n, "faces"))
+        scale_reg=float(p["scale_reg"]), blend_ramp=float(p["blend_ramp"]), seed=job.seed,
+        model=str(p.get("model", "")), device=job.device, progress=job.progress)
     attrs = {"holoflow.stage": "tangent_depth", "holoflow.depth_kind": "disparity",
              "holoflow.engine": job.engine, "holoflow.simulation": int(bool(result.engine.get("simulation")))}
     write_exr(job.output("disparity.exr"), {"Y": result.disparity}, attrs)
@@ -48,16 +47,8 @@ def main() -> int:
     return 0
 
 
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from holoflow.engines.weights import MissingWeights
-
-    return (ValueError, OSError, ImportError, MissingWeights)
-
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except Exception as exc:  # a user mistake ends in one line; anything else keeps its traceback
-        if isinstance(exc, _user_errors()):
-            sys.exit(f"tangent_depth: {exc}")
-        raise
+    from holoflow.stage import run_main
+
+    run_main(main, "tangent_depth")

@@ -3,9 +3,6 @@ together; writes the final scene (scene.ply, 3DGS layout), train_log.json and sR
 from inside the scene (previews/look_around.png strip, previews/look_around.gif)."""
 from __future__ import annotations
 
-import json
-import sys
-
 
 def main() -> int:
     from holoflow.stage import Job
@@ -18,7 +15,7 @@ def main() -> int:
 
     p = job.params
     if int(p["iters"]) < 0:
-        raise SystemExit(f"transfer_opt: iters must be >= 0, got {p['iters']}")
+        raise ValueError(f"iters must be >= 0, got {p['iters']}")
     xyz, rgb = read_points(job.input_file("cloud", "pf.ply"))
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
     inp_views, _ = load_view_set(job.input("inp"), alpha_is_mask=False) if p.get("use_inp", True) else ([], None)
@@ -38,7 +35,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except (ValueError, json.JSONDecodeError) as exc:
-        sys.exit(f"transfer_opt: {exc}")
+    from holoflow.stage import run_main
+
+    run_main(main, "transfer_opt")

@@ -25,6 +25,9 @@ from typing import Callable
 
 import numpy as np
 
+#: progress callback: (done, total, what), as holoflow.stage.Job.progress and holoflow.engines take it
+Progress = Callable[[int, int, str], None] | None
+
 RELATIVE_ENGINES = ("simulated", "prior", "depth_anything")
 METRIC_ENGINES = ("simulated", "prior", "zoedepth")
 
@@ -102,20 +105,24 @@ def layout_radial_depth(dirs: np.ndarray, layout: dict | None = None) -> np.ndar
 
 def relative_disparity(engine: str, images: np.ndarray, dirs: np.ndarray, cos: np.ndarray,
                        truth_radial: np.ndarray | None, seed: int, model: str = "", device: str = "cpu",
-                       progress: Callable[[int, int], None] | None = None) -> tuple[np.ndarray, dict]:
+                       progress: Progress = None) -> tuple[np.ndarray, dict]:
     """Relative perspective disparity [F, h, w] of the faces, and engine facts for the provenance.
 
-    ``images`` [F, h, w, 3] linear RGB faces; ``dirs`` [F, h, w, 3] world directions; ``cos`` [F, h, w];
-    ``truth_radial`` [F, h, w] true radial depth in the faces (``simulated`` only).
+    ``images`` [F, h, w, 3] *linear* RGB faces, passed to a real engine as they are (it encodes sRGB
+    once itself: DESIGN.md, EXR colour is linear light); ``dirs`` [F, h, w, 3] world directions;
+    ``cos`` [F, h, w]; ``truth_radial`` [F, h, w] true radial depth in the faces (``simulated`` only);
+    ``progress(done, total, what)``.
     """
     if engine == "simulated":
         if truth_radial is None:
             raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
                              "panorama); use engine 'prior' or 'depth_anything' for a panorama without one")
-        return simulated_relative(truth_radial, cos, seed), {
-            "engine": "simulated", "simulation": True, "calibration": dict(SIM_RELATIVE),
-            "note": "SIMULATED relative depth from the scene truth, not a network"}
+        out = simulated_relative(truth_radial, cos, seed)
+        _report(progress, len(out))
+        return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_RELATIVE),
+                     "note": "SIMULATED relative depth from the scene truth, not a network"}
     if engine == "prior":
+        _report(progress, len(cos))
         return (1.0 / (layout_radial_depth(dirs) * cos)).astype(np.float32), {
             "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
     if engine == "depth_anything":
@@ -128,16 +135,20 @@ def relative_disparity(engine: str, images: np.ndarray, dirs: np.ndarray, cos: n
 
 def metric_depth(engine: str, images: np.ndarray, dirs: np.ndarray, cos: np.ndarray,
                  truth_radial: np.ndarray | None, seed: int, model: str = "", device: str = "cpu",
-                 progress: Callable[[int, int], None] | None = None) -> tuple[np.ndarray, dict]:
-    """Metric perspective depth z [F, h, w] in metres (+inf unbounded) of the faces, and engine facts."""
+                 progress: Progress = None) -> tuple[np.ndarray, dict]:
+    """Metric perspective depth z [F, h, w] in metres (+inf unbounded) of the faces, and engine facts.
+
+    Arguments as for ``relative_disparity`` (``images`` linear RGB, encoded by the engine itself)."""
     if engine == "simulated":
         if truth_radial is None:
             raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
                              "panorama); use engine 'prior' or 'zoedepth' for a panorama without one")
-        return simulated_metric(truth_radial, cos, seed), {
-            "engine": "simulated", "simulation": True, "calibration": dict(SIM_METRIC),
-            "note": "SIMULATED metric depth from the scene truth, not a network"}
+        out = simulated_metric(truth_radial, cos, seed)
+        _report(progress, len(out))
+        return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_METRIC),
+                     "note": "SIMULATED metric depth from the scene truth, not a network"}
     if engine == "prior":
+        _report(progress, len(cos))
         return (layout_radial_depth(dirs) * cos).astype(np.float32), {
             "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
     if engine == "zoedepth":
@@ -147,3 +158,8 @@ def metric_depth(engine: str, images: np.ndarray, dirs: np.ndarray, cos: np.ndar
         return np.asarray(out, dtype=np.float32), {"engine": "zoedepth", "model": model}
     raise ValueError(f"unknown metric depth engine {engine!r}; choose one of {METRIC_ENGINES}")
 
+
+def _report(progress: Progress, n: int) -> None:
+    """All ``n`` faces done (the weight-free engines finish in one go)."""
+    if progress is not None:
+        progress(int(n), int(n), "faces")

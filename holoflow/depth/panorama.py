@@ -8,12 +8,10 @@ Arrays: panoramas are numpy [H, W, 3] linear RGB; radial depth [H, W] metres (+i
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
-
 import numpy as np
 
 from holoflow.depth.align import Alignment, align_faces
-from holoflow.depth.engines import metric_depth, relative_disparity
+from holoflow.depth.engines import Progress, metric_depth, relative_disparity
 from holoflow.depth.faces import face_rays, find_overlaps
 from holoflow.depth.metric import disparity_to_depth, robust_affine_fit
 from holoflow.depth.metrics import depth_metrics
@@ -85,11 +83,13 @@ def sample_radial(radial: np.ndarray, K, viewmat, size: int) -> np.ndarray:
 
 def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, face_size: int = 256,
                        padding: float = 0.3, method: str = "grid", grid=(8, 7), smoothness: float = 1.0,
-                       scale_reg: float = 0.1, seed: int = 0, model: str = "", device: str = "cpu",
-                       progress: Callable[[int, int], None] | None = None) -> TangentDepth:
+                       scale_reg: float = 0.1, blend_ramp: float = 0.5, seed: int = 0, model: str = "",
+                       device: str = "cpu", progress: Progress = None) -> TangentDepth:
     """Relative radial disparity [H, W] of a panorama [H, W, 3] (see the module docstring).
 
-    ``truth`` [H, W] radial depth (needed by the ``simulated`` engine only).
+    ``truth`` [H, W] radial depth (needed by the ``simulated`` engine only); ``blend_ramp`` the frustum
+    weights' ramp (fraction of the half-size, holoflow.geometry.icosahedron.frustum_weight);
+    ``progress(done, total, what)``.
     """
     H, W = pano.shape[:2]
     faces = icosahedron_faces(face_size, padding)
@@ -105,7 +105,7 @@ def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, 
     al = align_faces(raw, np.isfinite(raw), cos, overlaps, method, tuple(grid), smoothness, scale_reg)
     from holoflow.geometry.icosahedron import frustum_weight
 
-    disparity = blend_faces(al.radial, _np(frustum_weight(faces)), K, V, H, W)
+    disparity = blend_faces(al.radial, _np(frustum_weight(faces, blend_ramp)), K, V, H, W)
     return TangentDepth(disparity.astype(np.float32), raw.astype(np.float32), al.radial.astype(np.float32),
                         al, meta)
 
@@ -161,7 +161,7 @@ class MetricDepth:
 def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.ndarray | None, engine: str,
                           n_faces: int = 6, face_size: int = 256, padding: float = 0.3, seed: int = 0,
                           max_depth: float = 3000.0, huber: float = 0.05, model: str = "",
-                          device: str = "cpu", progress=None) -> MetricDepth:
+                          device: str = "cpu", progress: Progress = None) -> MetricDepth:
     """Metric radial depth from a relative disparity [H, W] and metric depth on a seeded face subset."""
     if not 1 <= n_faces <= 20:
         raise ValueError(f"metric_align faces must be in 1..20, got {n_faces}")

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-OPENCV_METHODS = ("telea", "ns", "fsr_fast", "fsr_best")
+OPENCV_METHODS = ("telea", "ns", "fsr_fast", "fsr_best")     # cv2 methods; ``background``: see inpaint_views
 
 
 def missing_mask(alpha: np.ndarray, pcd_valid: np.ndarray | None, alpha_threshold: float = 0.5) -> np.ndarray:
@@ -67,20 +67,79 @@ def inpaint_opencv(images: np.ndarray, masks: np.ndarray, method: str = "telea",
     return out
 
 
+DIRECTIONS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))   # (dy, dx)
+
+
+def first_observed(valid: np.ndarray, step: tuple[int, int], max_dist: int) -> tuple[np.ndarray, np.ndarray]:
+    """For every pixel, the nearest observed pixel along ``step`` (dy, dx) within ``max_dist`` steps.
+
+    valid [H, W] bool (True = observed). Returns (row, col) index arrays [H, W] of that pixel and the
+    step count [H, W] (0 for observed pixels themselves, -1 where none lies within reach)."""
+    h, w = valid.shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    dist = np.where(valid, 0, -1)                                     # [H, W]
+    for k in range(1, max_dist + 1):
+        y, x = yy + k * step[0], xx + k * step[1]
+        inside = (y >= 0) & (y < h) & (x >= 0) & (x < w)
+        hit = np.zeros_like(valid)
+        hit[inside] = valid[y[inside], x[inside]]
+        dist = np.where((dist < 0) & hit, k, dist)
+        if (dist >= 0).all():
+            break
+    k = np.maximum(dist, 0)
+    return (yy + k * step[0], xx + k * step[1]), dist
+
+
+def background_fill(image: np.ndarray, missing: np.ndarray, depth: np.ndarray, max_dist: int = 32,
+                    tol: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Fill disocclusion holes from their far (background) side.
+
+    A hole that opens when the camera moves is surface hidden behind a nearer object, so its content
+    continues the farther of the surfaces bordering it, not the occluder (a plain diffusion fill such
+    as Telea blends both). For each missing pixel the nearest observed pixel is found along 8 directions
+    (within ``max_dist`` px); among those hits, the ones whose depth is within ``tol`` (relative) of
+    the farthest hit are averaged, weighted by 1 / distance.
+    image [H, W, 3]; missing [H, W] bool; depth [H, W] metres (observed pixels' depth; missing ones
+    are ignored). Returns (filled image [H, W, 3] float32, still-missing [H, W] bool: pixels with no
+    observed pixel in reach). Observed pixels are returned unchanged."""
+    image = np.asarray(image, np.float32)
+    valid = ~np.asarray(missing, bool)
+    hits = [first_observed(valid, d, max_dist) for d in DIRECTIONS]
+    z = np.stack([np.where(dist > 0, depth[idx], -np.inf) for idx, dist in hits])      # [8, H, W]
+    far = z.max(0)                                                                     # [H, W]
+    use = np.isfinite(z) & (z >= far * (1.0 - tol))                                     # [8, H, W]
+    wts = np.stack([np.where(u, 1.0 / np.maximum(dist, 1), 0.0) for u, (_, dist) in zip(use, hits)])
+    col = np.stack([image[idx] for idx, _ in hits])                                    # [8, H, W, 3]
+    total = wts.sum(0)                                                                 # [H, W]
+    fill = (wts[..., None] * col).sum(0) / np.maximum(total, 1e-12)[..., None]
+    out = image.copy()
+    done = ~valid & (total > 0)
+    out[done] = fill[done]
+    return out, ~valid & ~done
+
+
 def inpaint_views(images: np.ndarray, masks: np.ndarray, engine: str, params: dict, device: str = "cpu",
-                  progress=None) -> np.ndarray:
+                  progress=None, depths: np.ndarray | None = None) -> np.ndarray:
     """Inpaint only the views that have missing pixels, with engine ``opencv`` or ``lama``.
-    images [N, H, W, 3] sRGB [0, 1]; masks [N, H, W] bool. Returns [N, H, W, 3] float32 where observed
-    pixels equal the input."""
+    images [N, H, W, 3] sRGB [0, 1]; masks [N, H, W] bool; depths [N, H, W] metres (the render's
+    depth, needed by opencv method ``background``: ``background_fill``, then ``telea`` for what it
+    cannot reach). Returns [N, H, W, 3] float32 where observed pixels equal the input."""
     images = np.asarray(images, dtype=np.float32)
     masks = np.asarray(masks, dtype=bool)
     todo = np.flatnonzero(masks.reshape(len(masks), -1).any(1))
     out = images.copy()
     if len(todo) == 0:
         return out
-    if engine == "opencv":
-        filled = inpaint_opencv(images[todo], masks[todo], params.get("method", "telea"),
+    method = params.get("method", "telea")
+    if engine == "opencv" and method == "background":
+        if depths is None:
+            raise ValueError("inpaint: method 'background' needs the rendered depth")
+        pre = [background_fill(images[i], masks[i], np.asarray(depths[i], np.float32),
+                               int(params.get("max_dist", 32))) for i in todo]
+        filled = inpaint_opencv(np.stack([f for f, _ in pre]), np.stack([r for _, r in pre]), "telea",
                                 float(params.get("radius", 5)))
+    elif engine == "opencv":
+        filled = inpaint_opencv(images[todo], masks[todo], method, float(params.get("radius", 5)))
     elif engine == "lama":
         import torch
 

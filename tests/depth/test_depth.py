@@ -259,6 +259,8 @@ def test_stages_write_contract_and_metrics(tmp_path, room_pano):
     assert sorted(read_exr(td / "faces" / "face_07.exr")[0]) == ["aligned.Y", "raw.Y"]
     assert "rel_rms" in json.loads((td / "alignment.json").read_text())["residuals"]
     assert "truth_oracle_affine" in proc.stdout
+    prog = [json.loads(l[10:]) for l in proc.stdout.splitlines() if l.startswith("@progress ")]
+    assert prog and prog[-1] == {"done": 20, "total": 20, "what": "faces"}
     proc, ma = _run_stage(tmp_path, "metric_align", "simulated", {"faces": 4, "face_size": 16, "model": ""},
                           {"disparity": td, "pano": src, "truth": src})
     assert proc.returncode == 0, proc.stderr
@@ -278,6 +280,45 @@ def test_unknown_engines_fail_clearly(room_pano):
         pd.metric_from_disparity(1.0 / r, rgb, r, "nonesuch", n_faces=2, face_size=8)
     with pytest.raises(ValueError, match="unknown alignment method"):
         pd.estimate_disparity(rgb, r, "prior", face_size=8, method="nonesuch")
+
+
+def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room_pano):
+    """The real engines encode sRGB themselves (DESIGN.md: EXR colour is linear light), so the depth code
+    must hand them the *linear* faces: an encode here too would be a double encode. Their progress
+    callbacks are called (done, total, what), as holoflow.stage.Job.progress takes them."""
+    from holoflow.engines import depth_anything, zoedepth
+    from holoflow.engines.common import linear_to_srgb
+
+    rgb, r = room_pano
+    faces = pd.icosahedron_faces(16, 0.3)
+    K, V = pd._np(faces.K), pd._np(faces.viewmat)
+    linear = pd.sample_faces(rgb, K, V, 16)  # [20, 16, 16, 3]
+    dirs, cos = face_rays(K, V, 16, 16)
+    z = _scene_radial(dirs) * cos  # what a perfect network would see, per face
+    seen = {}
+
+    def fake(kind, make):
+        def engine(images, model="", device="cpu", progress=None):
+            seen[kind] = np.array(images)
+            progress(0, len(images), "images")  # a 2-argument callback raises TypeError here
+            progress(len(images), len(images), "images")
+            which = [int(np.argmin(np.abs(linear - im).sum((1, 2, 3)))) for im in np.asarray(images)]
+            return make(z[which])
+        return engine
+
+    monkeypatch.setattr(depth_anything, "relative_disparity", fake("da", lambda zf: 2.0 / zf + 0.3))
+    monkeypatch.setattr(zoedepth, "metric_depth", fake("zd", lambda zf: zf))
+    calls = []
+    progress = lambda done, total, what: calls.append((done, total, what))  # noqa: E731
+    res = pd.estimate_disparity(rgb, None, "depth_anything", face_size=16, grid=(2, 2), progress=progress)
+    md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth", n_faces=3, face_size=16,
+                                  progress=progress)
+    assert np.allclose(seen["da"], linear, atol=1e-6)
+    assert np.allclose(seen["zd"], linear[md.faces], atol=1e-6)
+    assert not np.allclose(seen["da"], linear_to_srgb(linear), atol=0.05)  # an encode would show
+    assert calls == [(0, 20, "images"), (20, 20, "images"), (0, 3, "images"), (3, 3, "images")]
+    # the engines' own encode: linear 0.18 is sRGB 0.4614 -> 118 (a second encode would give 179)
+    assert depth_anything.to_uint8_srgb(np.full((1, 1, 1, 3), 0.18, np.float32)).ravel().tolist() == [118] * 3
 
 
 @pytest.mark.slow

@@ -11,8 +11,8 @@ def test_novel_cameras_are_seeded_and_inside_free_space():
     from holoflow.scene import cast, scene_from_prompt
 
     scene = scene_from_prompt("a modern living room with a sofa", 0)
-    a = heval.novel_cameras(scene, 6, 0.3, seed=1)
-    b = heval.novel_cameras(scene, 6, 0.3, seed=1)
+    a = heval.novel_cameras(scene, 6, 0.3, seed=1, candidates=4, probe=6)
+    b = heval.novel_cameras(scene, 6, 0.3, seed=1, candidates=4, probe=6)
     assert torch.equal(a, b) and a.shape == (6, 4, 4)
     R, t = a[:, :3, :3].double(), a[:, :3, 3].double()
     eyes = -torch.einsum("cji,cj->ci", R, t)                                   # camera centres
@@ -33,3 +33,19 @@ def test_report_formats_inf_nan_and_marks_unavailable_metrics():
     md = heval.markdown({"a room": {"full": r, "no_inp": r}}, args, {"lpips": "unavailable: x"}, "2-core CPU")
     assert "| a room | G1 | 12 | inf |" in md
     assert "lpips: unavailable" in md and "no_inp (n=1)" in md
+
+
+def test_nothing_is_hidden_from_the_centre_and_novel_cameras_see_disocclusions():
+    from holoflow.geometry.camera import look_at
+    from holoflow.scene import scene_from_prompt
+
+    scene = scene_from_prompt("a modern living room with a sofa", 0)
+    K = torch.tensor([[8.0, 0, 8], [0, 8, 8], [0, 0, 1]])
+    dirs = torch.tensor([[1.0, 0, 0], [-1, 0, 0], [0, 0, 1], [0, 0, -1], [0, 1, 0], [0.6, 0.3, 0.7]],
+                        dtype=torch.float64)
+    centre = look_at(torch.zeros_like(dirs), dirs).float()
+    assert not heval.hidden_masks(scene, centre, K, 12, 12).any()            # the panorama saw it all
+    picked = heval.novel_cameras(scene, 4, 0.6, seed=2, K=K, candidates=6, probe=8)
+    random = heval.novel_cameras(scene, 4, 0.6, seed=2, K=K, candidates=1, probe=8)   # same eyes, any view
+    h_picked, h_random = (float(heval.hidden_masks(scene, c, K, 16, 16).double().mean()) for c in (picked, random))
+    assert h_picked > 0.005 and h_picked >= h_random, (h_picked, h_random)
