@@ -11,29 +11,17 @@ engine, overlaps, solve and blending of tangent_depth plus metric_align.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 
+from holoflow.bench import machine
+
 INDOOR = ("a cozy living room with a sofa and a lamp", "a bedroom with a wooden bed",
           "a modern kitchen with a table")
 OUTDOOR = ("a sunny meadow with trees", "a beach by the sea", "a quiet village street with houses")
 METHODS = (("a", "median"), ("b", "affine"), ("c", "grid"))
-
-
-def machine() -> str:
-    model = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{platform.machine()}, {os.cpu_count()} cores (nproc), {model}"
 
 
 def render(prompt: str, width: int, seed: int) -> tuple[np.ndarray, np.ndarray, str]:

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import re
 import time
 from pathlib import Path
+
+from holoflow.bench import machine
 
 SHOWCASE = {  # preview name -> prompt: indoor, outdoor, stylized
     "living-room": "a cozy living room with a red sofa and wooden shelves",
@@ -74,19 +75,6 @@ def run_chain(prompt: str, sizes: dict[str, tuple[int, int]], samples: int = 2, 
                                    else lanczos_resize(up, *sizes["detail"]), 0.5)
     images["detail"] = det
     return images, times
-
-
-def machine() -> str:
-    model = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return f"{model}, nproc {os.cpu_count()}, {platform.system()} (load average {load:.1f} at the start)"
 
 
 def main(argv: list[str]) -> int:

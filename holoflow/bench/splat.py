@@ -13,26 +13,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from holoflow.bench import machine
+
 CONFIGS = [(1_000, 128), (10_000, 128), (10_000, 256), (10_000, 512), (100_000, 128),
            (100_000, 256), (100_000, 512), (1_000_000, 128), (1_000_000, 256), (1_000_000, 512)]
-
-
-def machine() -> str:
-    model = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{platform.machine()}, {os.cpu_count()} cores (nproc), {model}"
 
 
 def _peak_rss_mb() -> float:

@@ -11,8 +11,6 @@ loading from a local folder included, as a stage pays it. Writes a markdown tabl
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import tempfile
 import time
 from pathlib import Path
@@ -38,9 +36,9 @@ CASES = {
 
 
 def _machine(device: str) -> str:
-    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")), platform.processor() or "unknown CPU")
-    text = f"{os.cpu_count()} cores ({cpu})"
+    from holoflow.bench import machine
+
+    text = machine()
     if device.startswith("cuda"):
         import torch
 
