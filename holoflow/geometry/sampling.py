@@ -4,6 +4,14 @@ Panoramas are [C, H, W] or [B, C, H, W] tensors (conventions: holoflow.geometry.
 cameras are K [B, 3, 3] + world-to-camera viewmat [B, 4, 4] (holoflow.geometry.camera), all at
 the panorama centre's frame. Longitude wraps (column W is column 0); a row beyond a pole continues
 on the opposite meridian (row -1 at lon is row 0 at lon + pi), so bilinear taps stay on the sphere.
+
+Two e2p paths: ``sample_equirect(pano, pinhole_rays(...))`` is the simple reference (unit rays, the
+whole panorama padded, one grid_sample); ``equirect_to_pinhole`` is the fast path: per view it
+computes equirect pixel coordinates straight from K and the rotation (separable in rows and columns,
+no normalisation, longitude unwrapped around the view's axis so the seam never splits a view), cuts
+the panorama window the view can see (``equirect_window``: the same spherical continuation as
+``pad_equirect``) and samples only that. Tested equal to the reference within 5e-5 on a panorama of
+random [0, 1) pixels in float32 (coordinates agree to ~1e-4 px), 1e-10 in float64.
 """
 from __future__ import annotations
 
@@ -12,7 +20,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-from holoflow.geometry.camera import pinhole_rays, project_points
+from holoflow.geometry.camera import project_points
 from holoflow.geometry.sphere import direction_to_lonlat, equirect_directions, lonlat_to_equirect_pixel
 
 _PAD = 2  # spherical padding, pixels on every side; enough for bilinear and nearest taps
@@ -20,7 +28,8 @@ _PAD = 2  # spherical padding, pixels on every side; enough for bilinear and nea
 
 def pad_equirect(pano: torch.Tensor, pad: int = _PAD) -> torch.Tensor:
     """Spherical padding [..., C, H, W] -> [..., C, H + 2 pad, W + 2 pad]: columns wrap around the
-    seam; rows beyond a pole are the rows before it, flipped, half a turn away (exact for even W)."""
+    seam; rows beyond a pole are the rows before it, flipped, half a turn away: padded column c reads
+    column (c + W // 2) mod W (exact for even W, half a pixel short of the half turn for odd W)."""
     H, W = pano.shape[-2:]
     if pad > W or pad > H:  # tiny images: index arithmetic handles repeated wraps
         cols = torch.remainder(torch.arange(-pad, W + pad, device=pano.device), W)
@@ -34,7 +43,8 @@ def pad_equirect(pano: torch.Tensor, pad: int = _PAD) -> torch.Tensor:
     def wrap(x: torch.Tensor) -> torch.Tensor:
         return torch.cat([x[..., W - pad:], x, x[..., :pad]], dim=-1) if pad else x
 
-    turned = torch.roll(pano[..., :pad, :], W // 2, -1).flip(-2), torch.roll(pano[..., H - pad:, :], W // 2, -1).flip(-2)
+    half = -(W // 2)  # padded column c reads column c + W // 2 (the definition above, also for odd W)
+    turned = torch.roll(pano[..., :pad, :], half, -1).flip(-2), torch.roll(pano[..., H - pad:, :], half, -1).flip(-2)
     return wrap(torch.cat([turned[0], pano, turned[1]], dim=-2))
 
 
@@ -61,6 +71,84 @@ def sample_equirect(pano: torch.Tensor, dirs: torch.Tensor, mode: str = "bilinea
     return out.reshape(B, C, *dirs.shape[1:-1])
 
 
+def equirect_window(pano: torch.Tensor, row0: int, row1: int, col0: int, col1: int) -> torch.Tensor:
+    """Rows row0..row1-1, columns col0..col1-1 of a panorama [..., C, H, W], continued over the sphere
+    as ``pad_equirect`` does (columns wrap; a row beyond a pole is the row as far before it, half a turn
+    away; clamped to the panorama for tiny H) -> contiguous [..., C, row1 - row0, col1 - col0]."""
+    H, W = pano.shape[-2:]
+
+    def columns(rows: torch.Tensor, shift: int) -> torch.Tensor:  # columns col0 + shift .. col1 + shift, wrapped
+        pieces, c = [], col0 + shift
+        while c < col1 + shift:  # contiguous runs between wraps (copies, no index tensors)
+            start = c % W
+            n = min(W - start, col1 + shift - c)
+            pieces.append(rows[..., start:start + n])
+            c += n
+        return pieces[0] if len(pieces) == 1 else torch.cat(pieces, dim=-1)
+
+    parts = []
+    if row0 < 0:  # beyond the north pole, outermost first
+        src = (-torch.arange(row0, min(row1, 0), device=pano.device) - 1).clamp(0, H - 1)
+        parts.append(columns(pano.index_select(-2, src), W // 2))
+    lo, hi = max(row0, 0), min(row1, H)
+    if lo < hi:
+        parts.append(columns(pano[..., lo:hi, :], 0))
+    if row1 > H:  # beyond the south pole
+        src = (2 * H - 1 - torch.arange(max(row0, H), row1, device=pano.device)).clamp(0, H - 1)
+        parts.append(columns(pano.index_select(-2, src), W // 2))
+    return torch.cat(parts, dim=-2) if len(parts) > 1 else parts[0].contiguous()
+
+
+def view_lonlat(K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int, dtype=None
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Spherical angles of every pixel centre of pinhole views K [B, 3, 3], viewmat [B, 4, 4]:
+    (dlon [B, h, w], colat [B, h, w], lon0 [B]), radians, computed in ``dtype`` (default K's).
+
+    lon = lon0 + dlon, with lon0 the longitude of the view's optical axis and dlon in [-pi, pi], so
+    lon is continuous over the view (a view across the seam is not split); colat = pi/2 - lat in
+    [0, pi]. The ray of pixel (x, y) is R^T (xs, ys, 1), turned by -lon0 about the y axis, which is
+    separable: (xs, ys) = ((x - cx) / fx - s ys / fx, (y - cy) / fy); no normalisation (atan2 needs none)."""
+    dtype = dtype or K.dtype
+    K, R = K.to(dtype), viewmat[..., :3, :3].to(dtype)  # [B, 3, 3]
+    lon0 = torch.atan2(R[:, 2, 0], R[:, 2, 2])  # [B]; 0 when looking straight up or down
+    c, s = torch.cos(lon0), torch.sin(lon0)
+    zero, one = torch.zeros_like(c), torch.ones_like(c)
+    turn = torch.stack([c, zero, -s, zero, one, zero, s, zero, c], -1).reshape(-1, 3, 3)  # rotation by -lon0 about y
+    M = turn @ R.transpose(-1, -2)  # [B, 3, 3]: turned world ray = M @ camera ray
+    fx, fy, cx, cy, skew = K[:, 0, 0], K[:, 1, 1], K[:, 0, 2], K[:, 1, 2], K[:, 0, 1]
+    xs = (torch.arange(width, device=K.device, dtype=dtype) + 0.5 - cx[:, None]) / fx[:, None]  # [B, w]
+    ys = (torch.arange(height, device=K.device, dtype=dtype) + 0.5 - cy[:, None]) / fy[:, None]  # [B, h]
+    col_part = M[:, :, 0, None] * xs[:, None, :] + M[:, :, 2, None]  # [B, 3, w]
+    row_part = (M[:, :, 1] - M[:, :, 0] * (skew / fx)[:, None])[:, :, None] * ys[:, None, :]  # [B, 3, h]
+    d = row_part[..., :, None] + col_part[..., None, :]  # [B, 3, h, w]
+    x, y, z = d.unbind(1)
+    return torch.atan2(x, z), torch.atan2(torch.hypot(x, z), -y), lon0
+
+
+def _sample_views(pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int,
+                  mode: str) -> torch.Tensor:
+    """Fast e2p: each view samples only its window of the panorama [C, H, W] (shared) or [B, C, H, W]
+    -> [B, C, height, width]."""
+    H, W = pano.shape[-2:]
+    dtype = torch.promote_types(pano.dtype, torch.float32)
+    dlon, colat, lon0 = view_lonlat(K, viewmat, height, width, dtype)  # [B, h, w], [B, h, w], [B]
+    su, sv = W / (2.0 * math.pi), H / math.pi  # equirect pixels per radian
+    stats = torch.stack([dlon.amin((1, 2)), dlon.amax((1, 2)), colat.amin((1, 2)), colat.amax((1, 2)), lon0], 1)
+    out = []
+    for b, (lo_l, hi_l, lo_c, hi_c, l0) in enumerate(stats.double().tolist()):  # one device sync for all views
+        u0 = (l0 + math.pi) * su  # equirect column of the axis: u = u0 + su dlon
+        c0, c1 = math.floor(u0 + su * lo_l - 0.5) - 1, math.floor(u0 + su * hi_l - 0.5) + 3  # 1 px margin
+        r0, r1 = math.floor(sv * lo_c - 0.5) - 1, math.floor(sv * hi_c - 0.5) + 3
+        win = equirect_window(pano if pano.dim() == 3 else pano[b], r0, r1, c0, c1)  # [C, r1 - r0, c1 - c0]
+        wc, hc = c1 - c0, r1 - r0
+        # normalised window coordinates (align_corners=False): g = 2 (u - c0) / wc - 1, offsets in float64
+        gx = dlon[b] * (2.0 * su / wc) + (2.0 * (u0 - c0) / wc - 1.0)
+        gy = colat[b] * (2.0 * sv / hc) - (2.0 * r0 / hc + 1.0)
+        grid = torch.stack([gx, gy], -1)[None].to(win.dtype)  # [1, h, w, 2]
+        out.append(F.grid_sample(win[None], grid, mode=mode, padding_mode="border", align_corners=False))
+    return out[0] if len(out) == 1 else torch.cat(out, 0)
+
+
 def equirect_to_pinhole(pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int,
                         mode: str = "bilinear", supersample: int = 2) -> torch.Tensor:
     """Perspective views [B, C, height, width] of a panorama [C, H, W] (shared) or [B, C, H, W].
@@ -68,13 +156,14 @@ def equirect_to_pinhole(pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tens
     K [B, 3, 3], viewmat [B, 4, 4] (only the rotation matters: the panorama is seen from its centre).
     ``mode``: "bilinear" / "nearest" sample each pixel centre; "antialias" first shrinks the panorama
     (resize_equirect) until one of its pixels is no wider than a view pixel at the view's centre, then
-    averages ``supersample`` x ``supersample`` bilinear samples per view pixel."""
+    averages ``supersample`` x ``supersample`` bilinear samples per view pixel. Ray math runs in the
+    panorama's dtype (at least float32); the fast path of the module docstring."""
     if K.dim() == 2:
         K, viewmat = K[None], viewmat[None]
-    B = K.shape[0]
+    B = max(K.shape[0], viewmat.shape[0])
+    K, viewmat = K.expand(B, 3, 3), viewmat.expand(B, 4, 4)
     if mode in ("bilinear", "nearest"):
-        _, dirs = pinhole_rays(K, viewmat, height, width)  # [B, h, w, 3]
-        return sample_equirect(pano, dirs, mode)
+        return _sample_views(pano, K, viewmat, height, width, mode)
     if mode != "antialias":
         raise ValueError(f"equirect_to_pinhole: mode must be bilinear, nearest or antialias, got {mode!r}")
     s = int(supersample)
@@ -93,9 +182,8 @@ def equirect_to_pinhole(pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tens
             src = levels[(h2, w2)]
         else:
             src = resize_equirect(pano[b], h2, w2)
-        _, dirs = pinhole_rays(scale @ K[b], viewmat[b], height * s, width * s)  # [h s, w s, 3]
-        fine = sample_equirect(src, dirs[None], "bilinear")  # [1, C, h s, w s]
-        out.append(F.avg_pool2d(fine, s) if s > 1 else fine)
+        fine = _sample_views(src, (scale @ K[b])[None], viewmat[b:b + 1], height * s, width * s, "bilinear")
+        out.append(F.avg_pool2d(fine, s) if s > 1 else fine)  # [1, C, h, w]
     return torch.cat(out, 0)
 
 

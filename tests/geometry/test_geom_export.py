@@ -14,7 +14,6 @@ def _cams():
     sup = supplementary_rig(base, torch.full((5,), 2.0, dtype=torch.float64), 0.1, 10.0)
     V = torch.cat([base, sup])
     K = intrinsics_from_fov(47.4, 64, 48, dtype=torch.float64)
-    n = V.shape[0]
     names = [f"{i:03d}" for i in range(5)] + [f"{i // 4:03d}_{i % 4}" for i in range(20)]
     return cameras_json(K, V, 64, 48, names, [f"views/{x}.exr" for x in names],
                         kinds=["base"] * 5 + ["supplementary"] * 20, bases=list(range(5)) + [i // 4 for i in range(20)]), K, V
