@@ -33,13 +33,14 @@ def render(prompt: str, width: int, seed: int) -> tuple[np.ndarray, np.ndarray, 
     return np.asarray(rgb), np.asarray(depth, dtype=np.float64), scene.kind
 
 
-def run_once(rgb, truth, method, face_size, grid, seed, n_faces=6, smoothness=1.0, scale_reg=0.1):
-    """One tangent_depth + metric_align pass; returns (metrics, oracle metrics, seconds)."""
+def run_once(rgb, truth, method, face_size, grid, seed, n_faces=6):
+    """One tangent_depth + metric_align pass (other settings: estimate_disparity's defaults, which are
+    pipeline.yaml's); returns (metrics, oracle metrics, seconds)."""
     from holoflow.depth import panorama as pd
 
     t0 = time.perf_counter()
     td = pd.estimate_disparity(rgb, truth, "simulated", face_size=face_size, method=method, grid=grid,
-                               smoothness=smoothness, scale_reg=scale_reg, seed=seed)
+                               seed=seed)
     md = pd.metric_from_disparity(td.disparity, rgb, truth, "simulated", n_faces=n_faces,
                                   face_size=face_size, seed=seed)
     seconds = time.perf_counter() - t0

@@ -82,8 +82,8 @@ def sample_radial(radial: np.ndarray, K, viewmat, size: int) -> np.ndarray:
 
 
 def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, face_size: int = 256,
-                       padding: float = 0.3, method: str = "grid", grid=(8, 7), smoothness: float = 1.0,
-                       scale_reg: float = 0.1, blend_ramp: float = 0.5, seed: int = 0, model: str = "",
+                       padding: float = 1.0, method: str = "grid", grid=(8, 7), smoothness: float = 1.0,
+                       scale_reg: float = 0.001, blend_ramp: float = 0.1, seed: int = 0, model: str = "",
                        device: str = "cpu", progress: Progress = None) -> TangentDepth:
     """Relative radial disparity [H, W] of a panorama [H, W, 3] (see the module docstring).
 

@@ -251,7 +251,7 @@ def test_stages_write_contract_and_metrics(tmp_path, room_pano):
     write_rgb(src / "pano.exr", rgb, {"holoflow.depth_kind": "radial"}, Z=r.astype(np.float32))
     proc, td = _run_stage(tmp_path, "tangent_depth", "simulated",
                           {"width": 64, "face_size": 16, "padding": 0.3, "grid": [3, 3], "smoothness": 1.0,
-                           "scale_reg": 0.01, "align": "grid", "model": ""}, {"pano": src, "truth": src})
+                           "scale_reg": 0.01, "blend_ramp": 0.5, "align": "grid", "model": ""}, {"pano": src, "truth": src})
     assert proc.returncode == 0, proc.stderr
     ch, attrs = read_exr(td / "disparity.exr")
     assert attrs["holoflow.depth_kind"] == "disparity" and attrs["holoflow.simulation"] == 1
@@ -310,7 +310,8 @@ def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room
     monkeypatch.setattr(zoedepth, "metric_depth", fake("zd", lambda zf: zf))
     calls = []
     progress = lambda done, total, what: calls.append((done, total, what))  # noqa: E731
-    res = pd.estimate_disparity(rgb, None, "depth_anything", face_size=16, grid=(2, 2), progress=progress)
+    res = pd.estimate_disparity(rgb, None, "depth_anything", face_size=16, padding=0.3, grid=(2, 2),
+                                 progress=progress)
     md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth", n_faces=3, face_size=16,
                                   progress=progress)
     assert np.allclose(seen["da"], linear, atol=1e-6)
