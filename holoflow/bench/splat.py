@@ -47,7 +47,7 @@ def run_one(n: int, size: int, repeat: int, ref_mem_gb: float, threads: int | No
     import torch
 
     from holoflow.splat import rasterize
-    from holoflow.splat.cpu import _bin_rows, depth_order
+    from holoflow.splat.cpu import count_pairs
     from holoflow.splat.cpu_project import project_cpu
     from holoflow.splat.synthetic import intrinsics, look_at, room_scene, surface_scene
 
@@ -78,11 +78,9 @@ def run_one(n: int, size: int, repeat: int, ref_mem_gb: float, threads: int | No
     with torch.no_grad():                            # pairs evaluated by the fast path
         pr = project_cpu(*params[:4], vm, K, size, size, 0.01, 1e10)
         feats = torch.cat([sc["colors"], pr["depths"][0, :, None], torch.ones(n, 1)], 1).numpy()
-        order = depth_order(pr["depths"].numpy()[0], pr["valid"].numpy()[0])
-        rec, _, _, ids, _, _ = _bin_rows(order, pr["means2d"].numpy()[0].astype(np.float64),
-                                         pr["ext"][0].numpy(), pr["conics"].numpy()[0],
-                                         sc["opacities"].numpy(), feats, size, size)
-        pairs = float((rec[ids, 8] - rec[ids, 7] + 1).sum())
+        pairs = float(count_pairs(pr["means2d"].numpy()[0].astype(np.float64), pr["conics"].numpy()[0],
+                                  sc["opacities"].numpy(), feats, pr["depths"].numpy()[0],
+                                  pr["valid"].numpy()[0], pr["ext"][0].numpy().astype(np.float64), size, size))
     row["pairs"] = pairs
     row["gaussians_per_pixel"] = pairs / size ** 2
     ref_bytes = 12 * 4 * size * size * n             # ~12 float32 [P, N] tensors kept for backward

@@ -1,5 +1,5 @@
-"""Fast CPU compositing: image-row bins in depth order, numba kernels for the forward pass and a
-hand-written backward pass, glued to torch autograd.
+"""Fast CPU compositing: 16x16 pixel tiles, per-tile depth order, numba kernels for the forward pass
+and a hand-written backward pass, glued to torch autograd.
 
 Forward per pixel (front to back): sigma = 0.5 (a dx^2 + c dy^2) + b dx dy, alpha = min(0.99,
 o exp(-sigma)); skip alpha < 1/255; stop before T would fall below 1e-4; out += f alpha T.
@@ -8,11 +8,14 @@ T_i = T_{i+1} / (1 - alpha_i) and a running suffix sum S = sum_{j>i} f_j w_j giv
 dL/dalpha_i = T_i <g, f_i> - <g, S> / (1 - alpha_i).
 
 Work follows the Gaussian-pixel pairs that can matter, not pixels x Gaussians: every Gaussian
-carries the pixel box where alpha >= 1/255 is possible (``project.pixel_extent``); Gaussians are
-packed front to back and listed per image row; a row task visits its list once and scatters each
-entry over its pixel span (per-pixel early stop). Per-(row, Gaussian) gradients go to their own slots
-and are summed in a fixed order, so results are deterministic whatever the thread count. Kernels are
-dtype-generic (float32 and float64 inputs, float64 arithmetic inside).
+carries the pixel box where alpha >= 1/255 is possible (``project.pixel_extent``); Gaussians whose
+box misses the image are culled before sorting; the rest are sorted front to back once and
+counting-sorted into tile lists (stable, so each list stays in depth order). A tile task visits its
+list once; per entry and pixel row it solves the ellipse sigma <= ln(255 o) for the exact column span,
+so only pixels inside the 1/255 ellipse are evaluated, and it stops when every pixel of the tile has
+saturated. Per-(tile, Gaussian) gradients are summed inside the tile task into their own slot and
+the slots are summed per Gaussian in a fixed order: deterministic whatever the thread count. Kernels
+are dtype-generic (float32 and float64 inputs, float64 arithmetic inside).
 """
 from __future__ import annotations
 
@@ -25,173 +28,251 @@ from numba import njit, prange
 
 from holoflow.splat.project import ALPHA_MAX, ALPHA_MIN, T_MIN
 
-@njit(cache=True)
-def _bin_rows(order, means2d, extent, conics, opac, feats, width, height):
-    """Pack visible Gaussians front to back and list them per image row.
+TILE = 16          # tile side, px
+SPAN_EPS = 1e-3    # px margin of the solved row span (pixels in it are still tested exactly)
 
-    order [n] visible Gaussians front to back; means2d, extent [N, 2] px; conics [N, 3]; opac [N];
-    feats [N, F]. Returns rec [n, 9] (mx, my, a, b, c, o, sigma bound ln(255 o) + 1e-6, x0, x1),
-    ft [n, F] (packed, float64), offsets [H + 1], ids [M] (packed index, ascending = front to back
-    within each row), pstart [n + 1] and ent [M] (each Gaussian's entries, by row). Gaussians whose
-    pixel box misses the image get no row entries."""
-    n = order.shape[0]
-    F = feats.shape[1]
-    rec = np.zeros((n, 9))
-    ft = np.empty((n, F))
-    y0s = np.zeros(n, np.int64)
-    y1s = np.full(n, -1, np.int64)
-    for p in range(n):
-        g = order[p]
+
+@njit(parallel=True, cache=True)
+def _boxes(visible, means2d, extent, opac, width, height, box):
+    """Pixel box [N, 4] (x0, x1, y0, y1, inclusive, clipped to the image) of each Gaussian's 1/255
+    reach; returns on-screen [N] bool (visible, finite, opacity >= 1/255 and the box meets the image).
+    means2d, extent [N, 2] px; pixel (col, row) is sampled at (col + 0.5, row + 0.5)."""
+    N = means2d.shape[0]
+    keep = np.zeros(N, np.bool_)
+    for g in prange(N):
         mx, my, ex, ey = means2d[g, 0], means2d[g, 1], extent[g, 0], extent[g, 1]
-        for f in range(F):
-            ft[p, f] = feats[g, f]
-        if not (math.isfinite(mx) and math.isfinite(my) and math.isfinite(ex) and math.isfinite(ey)):
+        box[g, 0], box[g, 1], box[g, 2], box[g, 3] = 0, -1, 0, -1
+        if not (visible[g] and opac[g] >= ALPHA_MIN and math.isfinite(mx) and math.isfinite(my)
+                and math.isfinite(ex) and math.isfinite(ey)):
             continue
         x0 = math.ceil(min(max(mx - ex - 0.5, -1.0), width + 1.0))     # clipped: no int overflow
         x1 = math.floor(min(max(mx + ex - 0.5, -1.0), width + 1.0))
         y0 = math.ceil(min(max(my - ey - 0.5, -1.0), height + 1.0))
         y1 = math.floor(min(max(my + ey - 0.5, -1.0), height + 1.0))
-        if not (x1 >= 0 and y1 >= 0 and x0 <= width - 1 and y0 <= height - 1):
-            continue
-        rec[p, 0], rec[p, 1] = mx, my
+        if x1 >= 0 and y1 >= 0 and x0 <= width - 1 and y0 <= height - 1 and x0 <= x1 and y0 <= y1:
+            box[g, 0], box[g, 1] = max(x0, 0), min(x1, width - 1)
+            box[g, 2], box[g, 3] = max(y0, 0), min(y1, height - 1)
+            keep[g] = True
+    return keep
+
+
+@njit(cache=True)
+def _bin_tiles(order, box, means2d, conics, opac, feats, width, height):
+    """Pack the on-screen Gaussians front to back and list them per tile.
+
+    order [n] on-screen Gaussians front to back; box [N, 4] from ``_boxes``; means2d [N, 2] px;
+    conics [N, 3]; opac [N]; feats [N, F]. Returns rec [n, 7] (mx, my, a, b, c, o, sigma bound
+    ln(255 o) + 1e-6), pbox [n, 4] (packed boxes), ft [n, F] (float64), offsets [tiles + 1],
+    ids [M] (packed index, ascending = front to back within each tile; tiles row-major),
+    pstart [n + 1] and ent [M] (each Gaussian's entries, by tile)."""
+    n = order.shape[0]
+    F = feats.shape[1]
+    ntx = (width + TILE - 1) // TILE
+    nty = (height + TILE - 1) // TILE
+    rec = np.empty((n, 7))
+    pbox = np.empty((n, 4), np.int64)
+    ft = np.empty((n, F))
+    counts = np.zeros(ntx * nty + 1, np.int64)
+    pstart = np.zeros(n + 1, np.int64)          # entries of Gaussian p: ent[pstart[p]:pstart[p + 1]]
+    for p in range(n):
+        g = order[p]
+        rec[p, 0], rec[p, 1] = means2d[g, 0], means2d[g, 1]
         rec[p, 2], rec[p, 3], rec[p, 4] = conics[g, 0], conics[g, 1], conics[g, 2]
         rec[p, 5] = opac[g]
-        rec[p, 6] = math.log(opac[g] / ALPHA_MIN) + 1e-6 if opac[g] > 0 else -1.0
-        rec[p, 7], rec[p, 8] = max(x0, 0), min(x1, width - 1)
-        y0s[p], y1s[p] = max(y0, 0), min(y1, height - 1)
-    counts = np.zeros(height + 1, np.int64)
-    for p in range(n):
-        for y in range(y0s[p], y1s[p] + 1):
-            counts[y + 1] += 1
+        rec[p, 6] = math.log(opac[g] / ALPHA_MIN) + 1e-6
+        for f in range(F):
+            ft[p, f] = feats[g, f]
+        for j in range(4):
+            pbox[p, j] = box[g, j]
+        tx0, tx1, ty0, ty1 = box[g, 0] // TILE, box[g, 1] // TILE, box[g, 2] // TILE, box[g, 3] // TILE
+        pstart[p + 1] = pstart[p] + (tx1 - tx0 + 1) * (ty1 - ty0 + 1)
+        for ty in range(ty0, ty1 + 1):
+            for tx in range(tx0, tx1 + 1):
+                counts[ty * ntx + tx + 1] += 1
     offsets = np.cumsum(counts)
     pos = offsets[:-1].copy()
     ids = np.empty(offsets[-1], np.int64)
-    pstart = np.zeros(n + 1, np.int64)          # entries of Gaussian p: ent[pstart[p]:pstart[p + 1]]
-    for p in range(n):
-        pstart[p + 1] = pstart[p] + max(y1s[p] - y0s[p] + 1, 0)
     ent = np.empty(offsets[-1], np.int64)
     for p in range(n):
-        for y in range(y0s[p], y1s[p] + 1):
-            ids[pos[y]] = p
-            ent[pstart[p] + y - y0s[p]] = pos[y]
-            pos[y] += 1
-    return rec, ft, offsets, ids, pstart, ent
+        i = pstart[p]
+        for ty in range(pbox[p, 2] // TILE, pbox[p, 3] // TILE + 1):
+            for tx in range(pbox[p, 0] // TILE, pbox[p, 1] // TILE + 1):
+                t = ty * ntx + tx
+                ids[pos[t]] = p
+                ent[i] = pos[t]
+                pos[t] += 1
+                i += 1
+    return rec, pbox, ft, offsets, ids, pstart, ent
+
+
+@njit(cache=True, inline="always")
+def _row_span(rec, pbox, p, py, px0, px1):
+    """Columns [lo, hi] of row py within [px0, px1] where sigma <= bound can hold (ellipse chord,
+    widened by SPAN_EPS); hi < lo when none. Also returns dy = py + 0.5 - my."""
+    dy = py + 0.5 - rec[p, 1]
+    a, b = rec[p, 2], rec[p, 3]
+    disc = b * b * dy * dy - a * (rec[p, 4] * dy * dy - 2.0 * rec[p, 6])
+    lo, hi = max(px0, pbox[p, 0]), min(px1, pbox[p, 1])
+    if not a > 0.0:                  # degenerate conic: the whole box, tested pixel by pixel
+        return lo, hi, dy
+    if disc < 0.0:
+        return lo, lo - 1, dy
+    r = math.sqrt(disc)
+    c0 = rec[p, 0] - 0.5 - b * dy / a
+    flo = c0 - r / a - SPAN_EPS
+    fhi = c0 + r / a + SPAN_EPS
+    if flo > lo:
+        lo = int(math.ceil(min(flo, hi + 1.0)))
+    if fhi < hi:
+        hi = int(math.floor(max(fhi, lo - 1.0)))
+    return lo, hi, dy
+
+
+@njit(cache=True, inline="always")
+def _tile_origin(t, width):
+    ntx = (width + TILE - 1) // TILE
+    return (t % ntx) * TILE, (t // ntx) * TILE
 
 
 @njit(parallel=True, cache=True)
-def _forward(rec, ft, offsets, ids, width, out, t_final, n_last):
-    """One image row per task: entries visited front to back, each scattered over its pixel span.
-    out [H, W, F], t_final [H, W], n_last [H, W] (one past the last composited entry; row start if none)."""
+def _forward(rec, pbox, ft, offsets, ids, width, height, out, t_final, n_last, evals):
+    """One tile per task: entries front to back, each over its rows' ellipse spans; the task ends
+    early once every pixel has saturated. out [H, W, F], t_final [H, W], n_last [H, W] (one past the
+    last composited entry; the tile's list start if none), evals [tiles] (pairs evaluated)."""
     F = ft.shape[1]
-    for py in prange(offsets.shape[0] - 1):
-        s, e = offsets[py], offsets[py + 1]
-        fy = py + 0.5
-        T = np.ones(width)
-        acc = np.zeros((width, F))
-        last = np.full(width, s)
-        done = np.zeros(width, np.bool_)
-        alive = width
+    for t in prange(offsets.shape[0] - 1):
+        s, e = offsets[t], offsets[t + 1]
+        ox, oy = _tile_origin(t, width)
+        tw, th = min(TILE, width - ox), min(TILE, height - oy)
+        T = np.ones((TILE, TILE))
+        acc = np.zeros((TILE, TILE, F))
+        last = np.full((TILE, TILE), s)
+        done = np.zeros((TILE, TILE), np.bool_)
+        alive = tw * th
+        ev = 0
         for k in range(s, e):
             p = ids[k]
-            for px in range(int(rec[p, 7]), int(rec[p, 8]) + 1):
-                if done[px]:
-                    continue
-                dx = px + 0.5 - rec[p, 0]
-                dy = fy - rec[p, 1]
-                sig = 0.5 * (rec[p, 2] * dx * dx + rec[p, 4] * dy * dy) + rec[p, 3] * dx * dy
-                if sig < 0.0 or sig > rec[p, 6]:
-                    continue
-                a = min(ALPHA_MAX, rec[p, 5] * math.exp(-sig))
-                if a < ALPHA_MIN:
-                    continue
-                t_next = T[px] * (1.0 - a)
-                if t_next < T_MIN:
-                    done[px] = True
-                    alive -= 1
-                    continue
-                w = a * T[px]
-                for f in range(F):
-                    acc[px, f] += ft[p, f] * w
-                T[px] = t_next
-                last[px] = k + 1
+            mx, ca, cb, cc, op, bound = rec[p, 0], rec[p, 2], rec[p, 3], rec[p, 4], rec[p, 5], rec[p, 6]
+            for py in range(max(oy, pbox[p, 2]), min(oy + th - 1, pbox[p, 3]) + 1):
+                lo, hi, dy = _row_span(rec, pbox, p, py, ox, ox + tw - 1)
+                ev += max(hi - lo + 1, 0)
+                j = py - oy
+                sy = 0.5 * cc * dy * dy
+                for px in range(lo, hi + 1):
+                    i = px - ox
+                    if done[j, i]:
+                        continue
+                    dx = px + 0.5 - mx
+                    sig = (0.5 * ca * dx + cb * dy) * dx + sy
+                    if sig < 0.0 or sig > bound:
+                        continue
+                    a = min(ALPHA_MAX, op * math.exp(-sig))
+                    if a < ALPHA_MIN:
+                        continue
+                    t_next = T[j, i] * (1.0 - a)
+                    if t_next < T_MIN:
+                        done[j, i] = True
+                        alive -= 1
+                        continue
+                    w = a * T[j, i]
+                    for f in range(F):
+                        acc[j, i, f] += ft[p, f] * w
+                    T[j, i] = t_next
+                    last[j, i] = k + 1
             if alive == 0:
                 break
-        for px in range(width):
-            for f in range(F):
-                out[py, px, f] = acc[px, f]
-            t_final[py, px] = T[px]
-            n_last[py, px] = last[px]
+        evals[t] = ev
+        for j in range(th):
+            for i in range(tw):
+                for f in range(F):
+                    out[oy + j, ox + i, f] = acc[j, i, f]
+                t_final[oy + j, ox + i] = T[j, i]
+                n_last[oy + j, ox + i] = last[j, i]
 
 
 @njit(parallel=True, cache=True)
-def _backward(rec, ft, offsets, ids, width, t_final, n_last, g_out, e_m2, e_con, e_op, e_ft):
-    """Back to front per row. Per entry k: e_m2 [M, 2], e_con [M, 3], e_op [M], e_ft [M, F] (all
-    written)."""
+def _backward(rec, pbox, ft, offsets, ids, width, height, t_final, n_last, g_out, eg):
+    """Back to front per tile. eg [M, 6 + F] per entry (all written): d/d(mx, my), d/d(conic a, b, c),
+    d/d opacity, d/d feats."""
     F = ft.shape[1]
-    for py in prange(offsets.shape[0] - 1):
-        s, e = offsets[py], offsets[py + 1]
-        fy = py + 0.5
-        T = t_final[py].copy()
-        S = np.zeros((width, F))
+    for t in prange(offsets.shape[0] - 1):
+        s, e = offsets[t], offsets[t + 1]
+        ox, oy = _tile_origin(t, width)
+        tw, th = min(TILE, width - ox), min(TILE, height - oy)
+        T = np.empty((TILE, TILE))
+        stop = s                            # entries at or past every pixel's n_last: no effect
+        for j in range(th):
+            for i in range(tw):
+                T[j, i] = t_final[oy + j, ox + i]
+                stop = max(stop, n_last[oy + j, ox + i])
+        eg[stop:e] = 0.0
+        S = np.zeros((TILE, TILE, F))
         gft = np.zeros(F)
-        for k in range(e - 1, s - 1, -1):
+        for k in range(stop - 1, s - 1, -1):
             p = ids[k]
+            mx, ca, cb, cc, op, bound = rec[p, 0], rec[p, 2], rec[p, 3], rec[p, 4], rec[p, 5], rec[p, 6]
             gm0 = gm1 = gc0 = gc1 = gc2 = go = 0.0
             gft[:] = 0.0
-            for px in range(int(rec[p, 7]), int(rec[p, 8]) + 1):
-                if k >= n_last[py, px]:
-                    continue
-                dx = px + 0.5 - rec[p, 0]
-                dy = fy - rec[p, 1]
-                sig = 0.5 * (rec[p, 2] * dx * dx + rec[p, 4] * dy * dy) + rec[p, 3] * dx * dy
-                if sig < 0.0 or sig > rec[p, 6]:
-                    continue
-                ex = math.exp(-sig)
-                a_raw = rec[p, 5] * ex
-                a = min(ALPHA_MAX, a_raw)
-                if a < ALPHA_MIN:
-                    continue
-                T[px] = T[px] / (1.0 - a)
-                w = a * T[px]
-                gdot = 0.0
-                sdot = 0.0
-                for f in range(F):
-                    gf = g_out[py, px, f]
-                    gft[f] += gf * w
-                    gdot += gf * ft[p, f]
-                    sdot += gf * S[px, f]
-                    S[px, f] += ft[p, f] * w
-                if a_raw > ALPHA_MAX:
-                    continue
-                g_a = T[px] * gdot - sdot / (1.0 - a)
-                go += ex * g_a
-                g_sig = -a * g_a
-                gc0 += g_sig * 0.5 * dx * dx
-                gc1 += g_sig * dx * dy
-                gc2 += g_sig * 0.5 * dy * dy
-                gm0 -= g_sig * (rec[p, 2] * dx + rec[p, 3] * dy)
-                gm1 -= g_sig * (rec[p, 3] * dx + rec[p, 4] * dy)
-            e_m2[k, 0], e_m2[k, 1] = gm0, gm1
-            e_con[k, 0], e_con[k, 1], e_con[k, 2] = gc0, gc1, gc2
-            e_op[k] = go
+            for py in range(max(oy, pbox[p, 2]), min(oy + th - 1, pbox[p, 3]) + 1):
+                lo, hi, dy = _row_span(rec, pbox, p, py, ox, ox + tw - 1)
+                j = py - oy
+                sy = 0.5 * cc * dy * dy
+                for px in range(lo, hi + 1):
+                    if k >= n_last[py, px]:
+                        continue
+                    i = px - ox
+                    dx = px + 0.5 - mx
+                    sig = (0.5 * ca * dx + cb * dy) * dx + sy
+                    if sig < 0.0 or sig > bound:
+                        continue
+                    ex = math.exp(-sig)
+                    a_raw = op * ex
+                    a = min(ALPHA_MAX, a_raw)
+                    if a < ALPHA_MIN:
+                        continue
+                    T[j, i] = T[j, i] / (1.0 - a)
+                    w = a * T[j, i]
+                    gdot = 0.0
+                    sdot = 0.0
+                    for f in range(F):
+                        gf = g_out[py, px, f]
+                        gft[f] += gf * w
+                        gdot += gf * ft[p, f]
+                        sdot += gf * S[j, i, f]
+                        S[j, i, f] += ft[p, f] * w
+                    if a_raw > ALPHA_MAX:
+                        continue
+                    g_a = T[j, i] * gdot - sdot / (1.0 - a)
+                    go += ex * g_a
+                    g_sig = -a * g_a
+                    gc0 += g_sig * 0.5 * dx * dx
+                    gc1 += g_sig * dx * dy
+                    gc2 += g_sig * 0.5 * dy * dy
+                    gm0 -= g_sig * (ca * dx + cb * dy)
+                    gm1 -= g_sig * (cb * dx + cc * dy)
+            eg[k, 0], eg[k, 1] = gm0, gm1
+            eg[k, 2], eg[k, 3], eg[k, 4] = gc0, gc1, gc2
+            eg[k, 5] = go
             for f in range(F):
-                e_ft[k, f] = gft[f]
+                eg[k, 6 + f] = gft[f]
 
 
 @njit(parallel=True, cache=True)
-def _gather_grads(pstart, ent, order, e_m2, e_con, e_op, e_ft, g_m2, g_con, g_op, g_ft):
-    """Sum per-entry gradients into per-Gaussian ones (original indices), rows in fixed order."""
+def _gather_grads(pstart, ent, order, eg, g_m2, g_con, g_op, g_ft):
+    """Sum per-entry gradients into per-Gaussian ones (original indices), tiles in fixed order."""
+    F = g_ft.shape[1]
     for p in prange(pstart.shape[0] - 1):
         g = order[p]
+        acc = np.zeros(6 + F)
         for i in range(pstart[p], pstart[p + 1]):
             k = ent[i]
-            g_m2[g, 0] += e_m2[k, 0]
-            g_m2[g, 1] += e_m2[k, 1]
-            for j in range(3):
-                g_con[g, j] += e_con[k, j]
-            g_op[g] += e_op[k]
-            for f in range(e_ft.shape[1]):
-                g_ft[g, f] += e_ft[k, f]
+            for j in range(6 + F):
+                acc[j] += eg[k, j]
+        g_m2[g, 0], g_m2[g, 1] = acc[0], acc[1]
+        g_con[g, 0], g_con[g, 1], g_con[g, 2] = acc[2], acc[3], acc[4]
+        g_op[g] = acc[5]
+        for f in range(F):
+            g_ft[g, f] = acc[6 + f]
 
 
 # Serial twins for small problems: waking the thread pool costs more than it saves there,
@@ -205,16 +286,18 @@ def serial_twin(dispatcher):
     return njit(cache=True)(g)
 
 
+_boxes_serial = serial_twin(_boxes)
 _forward_serial = serial_twin(_forward)
 _backward_serial = serial_twin(_backward)
 _gather_grads_serial = serial_twin(_gather_grads)
-PARALLEL_MIN_ENTRIES = 20000   # row entries below which the serial kernels run
+PARALLEL_MIN_ENTRIES = 20000   # tile entries below which the serial kernels run
+PARALLEL_MIN_GAUSSIANS = 50000  # Gaussians below which the serial culling runs
 
 
-def depth_order(depths: np.ndarray, visible: np.ndarray) -> np.ndarray:
-    """Indices of visible Gaussians sorted front to back, ties by index. Sorts one int64 key
+def depth_order(depths: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Indices of kept Gaussians sorted front to back, ties by index. Sorts one int64 key
     (float32 bits of the depth, then the index): several times faster than a stable argsort."""
-    idx = np.nonzero(visible)[0]
+    idx = np.nonzero(keep)[0]
     bits = max(int(len(depths) - 1).bit_length(), 1)
     if bits > 32:
         return idx[np.argsort(depths[idx], kind="stable")]
@@ -222,51 +305,74 @@ def depth_order(depths: np.ndarray, visible: np.ndarray) -> np.ndarray:
     return np.sort((d << bits) | idx) & ((1 << bits) - 1)
 
 
+def bin_camera(means2d, conics, opac, feats, depths, visible, extent, width, height):
+    """Cull, depth-sort and tile-bin one camera (numpy arrays [N, ...]). Returns (order, pack) with
+    pack = (rec, pbox, ft, offsets, ids, pstart, ent) as ``_bin_tiles``."""
+    N = means2d.shape[0]
+    box = np.empty((N, 4), np.int64)
+    cull = _boxes if N >= PARALLEL_MIN_GAUSSIANS else _boxes_serial
+    keep = cull(visible, means2d, extent, opac, width, height, box)
+    order = depth_order(depths, keep)
+    return order, _bin_tiles(order, box, means2d, conics, opac, feats, width, height)
+
+
+def count_pairs(means2d, conics, opac, feats, depths, visible, extent, width, height) -> int:
+    """Gaussian-pixel pairs the forward kernel visits for one camera (numpy arrays [N, ...] as
+    ``bin_camera``): the work measure of `holoflow bench splat`."""
+    order, pack = bin_camera(means2d, conics, opac, feats, depths, visible, extent, width, height)
+    ntiles = ((width + TILE - 1) // TILE) * ((height + TILE - 1) // TILE)
+    evals = np.zeros(ntiles, np.int64)
+    _forward_serial(*pack[:5], width, height, np.empty((height, width, feats.shape[1]), feats.dtype),
+                    np.empty((height, width)), np.empty((height, width), np.int64), evals)
+    return int(evals.sum())
+
+
 class _CompositeCPU(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, means2d, conics, opacities, feats, orders, extent, width, height):
-        # means2d [C, N, 2], conics [C, N, 3], opacities [C, N], feats [C, N, F]; orders: per camera
-        # visible Gaussians front to back; extent [C, N, 2] px (no gradient)
+    def forward(ctx, means2d, conics, opacities, feats, depths, visible, extent, width, height):
+        # means2d [C, N, 2], conics [C, N, 3], opacities [C, N], feats [C, N, F], depths [C, N]
+        # (sort key), visible [C, N]; extent [C, N, 2] px. depths, visible, extent: no gradient.
         C, N, F = feats.shape
         np_in = [t.detach().contiguous().numpy() for t in (means2d, conics, opacities, feats)]
         m2 = np_in[0].astype(np.float64)
         ex = extent.detach().to(torch.float64).contiguous().numpy()
+        dp, vis = depths.detach().contiguous().numpy(), visible.contiguous().numpy()
         out = np.empty((C, height, width, F), np_in[3].dtype)
         t_final = np.empty((C, height, width))
         n_last = np.empty((C, height, width), np.int64)
+        ntiles = ((width + TILE - 1) // TILE) * ((height + TILE - 1) // TILE)
+        evals = np.zeros((C, ntiles), np.int64)
         packs = []
         for c in range(C):
-            pack = _bin_rows(orders[c], m2[c], ex[c], np_in[1][c], np_in[2][c], np_in[3][c], width, height)
-            fwd = _forward if pack[3].shape[0] >= PARALLEL_MIN_ENTRIES else _forward_serial
-            fwd(*pack[:4], width, out[c], t_final[c], n_last[c])
-            packs.append(pack)
-        ctx.saved = (packs, orders, t_final, n_last, width, [a.shape for a in np_in], np_in[3].dtype)
+            order, pack = bin_camera(m2[c], np_in[1][c], np_in[2][c], np_in[3][c], dp[c], vis[c],
+                                     ex[c], width, height)
+            fwd = _forward if pack[4].shape[0] >= PARALLEL_MIN_ENTRIES else _forward_serial
+            fwd(*pack[:5], width, height, out[c], t_final[c], n_last[c], evals[c])
+            packs.append((order, pack))
+        ctx.saved = (packs, t_final, n_last, width, height, [a.shape for a in np_in], np_in[3].dtype)
+        ctx.evals = int(evals.sum())
         return torch.from_numpy(out)
 
     @staticmethod
     def backward(ctx, grad_out):
-        packs, orders, t_final, n_last, width, shapes, dtype = ctx.saved
+        packs, t_final, n_last, width, height, shapes, dtype = ctx.saved
         F = shapes[3][2]
         g_out = grad_out.detach().to(torch.float64).contiguous().numpy()
         grads = [np.zeros(sh, dtype) for sh in shapes]
-        for c, (rec, ft, offsets, ids, pstart, ent) in enumerate(packs):
-            M = ids.shape[0]
-            e = (np.empty((M, 2)), np.empty((M, 3)), np.empty(M), np.empty((M, F)))
-            par = M >= PARALLEL_MIN_ENTRIES
-            (_backward if par else _backward_serial)(rec, ft, offsets, ids, width, t_final[c],
-                                                     n_last[c], g_out[c], *e)
-            (_gather_grads if par else _gather_grads_serial)(pstart, ent, orders[c], *e,
+        for c, (order, (rec, pbox, ft, offsets, ids, pstart, ent)) in enumerate(packs):
+            eg = np.empty((ids.shape[0], 6 + F))
+            par = ids.shape[0] >= PARALLEL_MIN_ENTRIES
+            (_backward if par else _backward_serial)(rec, pbox, ft, offsets, ids, width, height,
+                                                     t_final[c], n_last[c], g_out[c], eg)
+            (_gather_grads if par else _gather_grads_serial)(pstart, ent, order, eg,
                                                              *[g[c] for g in grads])
-        return (*[torch.from_numpy(g) for g in grads], None, None, None, None)
+        return (*[torch.from_numpy(g) for g in grads], None, None, None, None, None)
 
 
 def composite_cpu(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
                   feats: torch.Tensor, depths: torch.Tensor, visible: torch.Tensor,
-                  extent: torch.Tensor, width: int, height: int) -> tuple[torch.Tensor, list]:
+                  extent: torch.Tensor, width: int, height: int) -> torch.Tensor:
     """Fast compositing, same contract as ``reference.composite_dense`` plus ``extent`` [C, N, 2]
-    (px half-size of each Gaussian's reach, see ``project.pixel_extent``).
-    Returns (out [C, H, W, F], orders: per camera the visible Gaussians front to back)."""
-    dp, vis = depths.detach().numpy(), visible.numpy()
-    orders = [depth_order(dp[c], vis[c]) for c in range(feats.shape[0])]
-    out = _CompositeCPU.apply(means2d, conics, opacities, feats, orders, extent, width, height)
-    return out, orders
+    (px half-size of each Gaussian's reach, see ``project.pixel_extent``). Returns [C, H, W, F]."""
+    return _CompositeCPU.apply(means2d, conics, opacities, feats, depths, visible, extent, width,
+                               height)

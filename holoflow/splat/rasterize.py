@@ -63,8 +63,8 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
     else:
         from holoflow.splat.cpu import composite_cpu
 
-        out, _ = composite_cpu(proj["means2d"], proj["conics"], ops, feats, depths, proj["valid"],
-                               ext, width, height)
+        out = composite_cpu(proj["means2d"], proj["conics"], ops, feats, depths, proj["valid"],
+                            ext, width, height)
     m2 = proj["means2d"].detach()
     on_screen = ((m2 + ext >= 0) & (m2 - ext <= m2.new_tensor([width, height]))).all(-1)
     radii = torch.where(proj["valid"] & on_screen & (ops.detach() >= 1 / 255),
