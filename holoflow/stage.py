@@ -71,6 +71,13 @@ class Job:
                              f"(has: {sorted(p.name for p in self.input(name).iterdir())})")
         return path
 
+    def image_size(self) -> tuple[int, int]:
+        """(width, height) in pixels from the ``width`` / ``height`` params; ValueError below 1."""
+        width, height = int(self.params["width"]), int(self.params["height"])
+        if width < 1 or height < 1:
+            raise ValueError(f"width and height must be >= 1, got {width}x{height}")
+        return width, height
+
     def output(self, filename: str) -> Path:
         """Path for an output file (subfolders allowed); its parent is created."""
         path = (self.output_dir / filename).resolve()

@@ -15,7 +15,7 @@ def main() -> int:
     from holoflow.io.exr import write_rgb
 
     p = job.params
-    width, height = _size(p)
+    width, height = job.image_size()
     attrs = {"holoflow.stage": "base_pano", "holoflow.engine": job.engine}
     if job.engine == "procedural":
         import os
@@ -50,13 +50,6 @@ def main() -> int:
     else:
         raise ValueError(f"unknown engine {job.engine!r} (procedural | diffusion360)")
     return 0
-
-
-def _size(p: dict) -> tuple[int, int]:
-    width, height = int(p["width"]), int(p["height"])
-    if width < 1 or height < 1:
-        raise ValueError(f"width and height must be >= 1, got {width}x{height}")
-    return width, height
 
 
 if __name__ == "__main__":

@@ -19,9 +19,7 @@ def main() -> int:
     from holoflow.io.exr import read_rgb, write_exr, write_rgb
 
     p = job.params
-    width, height = int(p["width"]), int(p["height"])
-    if width < 1 or height < 1:
-        raise ValueError(f"width and height must be >= 1, got {width}x{height}")
+    width, height = job.image_size()
     base = read_rgb(job.input_file("pano", "pano.exr"))                               # [H, W, 3] linear
     attrs = {"holoflow.stage": "stylize", "holoflow.engine": job.engine}
     if job.engine == "classical":

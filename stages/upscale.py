@@ -14,9 +14,7 @@ def main() -> int:
     from holoflow.io.exr import read_rgb, write_rgb
 
     p = job.params
-    width, height = int(p["width"]), int(p["height"])
-    if width < 1 or height < 1:
-        raise ValueError(f"width and height must be >= 1, got {width}x{height}")
+    width, height = job.image_size()
     pano = read_rgb(job.input_file("pano", "pano.exr"))                               # [H, W, 3] linear
     if job.engine == "lanczos":
         from holoflow.imageops.resize import lanczos_resize
