@@ -3,7 +3,9 @@
 For every base camera of pano_set's cameras.json, four supplementary cameras (above, below, left,
 right; holoflow.geometry.rigs.supplementary_rig) are moved by ``offset`` x that base view's median
 scene depth (the median z of P_s's z-buffer from the base camera) and turned ``angle_deg`` back
-towards the base view's axis. P_s (point_cloud's ps.ply) is projected into each with a z-buffer,
+towards the base view's axis; the median leaves out the sky on point_cloud's far shell
+(points at >= 0.999 of the largest radius), so an outdoor view's offset follows its ground and
+objects, not the sky. P_s (point_cloud's ps.ply) is projected into each with a z-buffer,
 nearest point wins, each point covering (2 R - 1)^2 pixels: R = ``splat_radius``, or with 0 (auto) each
 point's own footprint (holoflow.geometry.pointcloud.footprint_radius, from P_s's angular step
 2 pi / width, width = sqrt(2 N) since P_s keeps every pixel of its width x width/2 grid), so the
@@ -19,6 +21,9 @@ from __future__ import annotations
 
 import math
 import os
+
+
+SHELL_REL = 0.999  # points at >= this fraction of the cloud's largest radius are sky (the far shell)
 
 
 def main() -> int:
@@ -62,14 +67,19 @@ def main() -> int:
     M = base_V.shape[0]
     spacing = 2.0 * math.pi / math.sqrt(2.0 * len(xyz))  # P_s's angular step, radians
 
-    def radii(viewmat):
-        return radius if radius > 0 else footprint_radius(pts, viewmat, K, spacing)
+    def radii(viewmat, points=pts):
+        return radius if radius > 0 else footprint_radius(points, viewmat, K, spacing)
 
+    r = torch.linalg.vector_norm(pts, dim=-1)  # [N] m
+    solid = r < SHELL_REL * r.max()  # not on point_cloud's far sky shell (the farthest radius there is)
+    if not solid.any():
+        solid = torch.ones_like(solid)
+    geo, geo_rgb = pts[solid], linear[solid]  # [G, 3] each
     medians = []
-    for i in range(M):  # typical scene depth seen by each base camera
-        _, hit, z = project_points_zbuffer(pts, linear, K, base_V[i], H, W, radii(base_V[i]))
+    for i in range(M):  # typical depth of the geometry (not the sky) seen by each base camera
+        _, hit, z = project_points_zbuffer(geo, geo_rgb, K, base_V[i], H, W, radii(base_V[i], geo))
         zs = z[hit > 0]
-        medians.append(float(zs.median()) if zs.numel() else float(torch.linalg.vector_norm(pts, dim=-1).median()))
+        medians.append(float(zs.median()) if zs.numel() else float(r[solid].median()))
     medians_t = torch.tensor(medians, dtype=torch.float64, device=device)
     sup = supplementary_rig(base_V, medians_t, offset, angle)  # [4 M, 4, 4]
     names, files, bases, missing = [], [], [], []

@@ -134,3 +134,25 @@ def test_stage_reruns_are_byte_identical(stage_outputs, rgbd_dir, tmp_path):
         assert files and files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
         for f in files:
             assert (a / f).read_bytes() == (b / f).read_bytes(), f"{stage}: {f} differs on rerun"
+
+
+def test_pcd_set_offsets_ignore_the_sky_shell(tmp_path):
+    """Outdoors (upper hemisphere all sky), views looking up see mostly the far shell: their offset
+    still follows the geometry's median depth, never the sky's."""
+    rgb, depth = rgbd_pano(64, 128, torch.float64, "cpu")
+    depth[:32] = float("inf")
+    src = tmp_path / "rgbd"
+    src.mkdir()
+    write_rgb(src / "pano.exr", rgb.numpy().astype(np.float32), {"holoflow.stage": "detail"})
+    write_exr(src / "depth.exr", {"Z": depth.numpy().astype(np.float32)}, {"holoflow.depth_kind": "radial"})
+    pc = run_stage(tmp_path, "point_cloud", {"p0_width": 64, "pf_width": 32, "ps_width": 64, "grad_threshold": 0.4,
+                                             "sky_radius": 0.0}, {"pano": src, "depth": src})
+    ps = run_stage(tmp_path, "pano_set", {"rig": "fibonacci", "cameras": 12, "size": 24, "fov_deg": 90.0},
+                   {"pano": src})
+    assert pc.returncode == 0 and ps.returncode == 0, pc.stderr + ps.stderr
+    pcd = run_stage(tmp_path, "pcd_set", {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0},
+                    {"cloud": tmp_path / "point_cloud_out", "cameras": tmp_path / "pano_set_out"})
+    assert pcd.returncode == 0, pcd.stderr
+    shell = [json.loads(ln[6:]) for ln in pc.stdout.splitlines() if ln.startswith("@meta ")][0]["shell_radius"]
+    med = [json.loads(ln[6:]) for ln in pcd.stdout.splitlines() if ln.startswith("@meta ")][0]["median_depth"]
+    assert max(med) < 0.5 * shell and min(med) > 0
