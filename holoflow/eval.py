@@ -24,6 +24,8 @@ import sys
 import time
 from pathlib import Path
 
+from holoflow.bench import machine
+
 PROMPTS = ["a cozy wooden cabin at night", "a sunny beach with palm trees",
            "a modern living room with a sofa and a lamp", "a stone courtyard with a fountain"]
 VARIANTS = {
@@ -222,10 +224,12 @@ def markdown(results: dict, args, availability: dict, machine: str) -> str:
              f"<= {args.offset} of the free distance, <= {MAX_OFFSET_M} m), backend `{args.backend}`. "
              f"Machine: {machine}. Images compared in sRGB [0, 1]; `empty` = fraction of pixels with "
              "rendered alpha < 0.5. base = vs PANO set at the base cameras (paper protocol); supp / novel = "
-             "vs true renders of the procedural scene.", "",
+             "vs true renders of the procedural scene; novel hidden_psnr = PSNR over the novel views' pixels "
+             "whose surface the panorama centre could not see (hidden_frac of them).", "",
              "Optional metrics: " + "; ".join(f"{k}: {v}" for k, v in availability.items()), ""]
     cols = [("base", "psnr"), ("base", "ssim"), ("supp", "psnr"), ("supp", "ssim"), ("supp", "empty"),
-            ("novel", "psnr"), ("novel", "ssim"), ("novel", "empty")]
+            ("novel", "psnr"), ("novel", "ssim"), ("novel", "empty"), ("novel", "hidden_psnr"),
+            ("novel", "hidden_frac")]
     head = "| scene | model | gaussians | " + " | ".join(f"{a} {b}" for a, b in cols) + " | seconds |"
     lines += ["## Full method per scene", "", head, "|" + "---|" * (len(cols) + 4)]
     for prompt, per in results.items():
@@ -234,14 +238,14 @@ def markdown(results: dict, args, availability: dict, machine: str) -> str:
             continue
         for tag in ("G0", "G1"):
             lines.append(f"| {prompt} | {tag} | {r[tag]['gaussians']} | "
-                         + " | ".join(_fmt(r[tag][a][b]) for a, b in cols) + f" | {_fmt(r['seconds'])} |")
+                         + " | ".join(_fmt(r[tag][a].get(b)) for a, b in cols) + f" | {_fmt(r['seconds'])} |")
     lines += ["", "## Ablations (G1, mean over scenes)", "",
               "| variant | " + " | ".join(f"{a} {b}" for a, b in cols) + " |", "|" + "---|" * (len(cols) + 1)]
     for variant in VARIANTS:
         rs = [per[variant]["G1"] for per in results.values() if variant in per]
         if not rs:
             continue
-        means = [_mean([r[a][b] for r in rs]) for a, b in cols]
+        means = [_mean([r[a].get(b) for r in rs]) for a, b in cols]
         lines.append(f"| {variant} (n={len(rs)}) | " + " | ".join(_fmt(m) for m in means) + " |")
     return "\n".join(lines) + "\n"
 
@@ -249,15 +253,6 @@ def markdown(results: dict, args, availability: dict, machine: str) -> str:
 def _mean(xs):
     xs = [x for x in xs if x is not None and not math.isnan(x)]
     return sum(xs) / len(xs) if xs else math.nan
-
-
-def _machine() -> str:
-    import os
-    import platform
-
-    model = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")),
-                 platform.processor()) if Path("/proc/cpuinfo").exists() else platform.processor()
-    return f"{os.cpu_count()}-core CPU ({model})"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -305,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"G1 novel {_fmt(r['G1']['novel']['psnr'])} dB, G1 base {_fmt(r['G1']['base']['psnr'])} dB",
                   file=sys.stderr)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(markdown(results, args, metrics.availability(args.iqa_dir), _machine()))
+    args.out.write_text(markdown(results, args, metrics.availability(args.iqa_dir), machine()))
     if args.json:
         args.json.write_text(json.dumps(results, indent=1, sort_keys=True))
     print(f"eval: report in {args.out}", file=sys.stderr)
