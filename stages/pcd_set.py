@@ -3,9 +3,11 @@
 For every base camera of pano_set's cameras.json, four supplementary cameras (above, below, left,
 right; holoflow.geometry.rigs.supplementary_rig) are moved by ``offset`` x that base view's median
 scene depth (the median z of P_s's z-buffer from the base camera) and turned ``angle_deg`` back
-towards the base view's axis; the median leaves out the sky on point_cloud's far shell
-(points at >= 0.999 of the largest radius), so an outdoor view's offset follows its ground and
-objects, not the sky. P_s (point_cloud's ps.ply) is projected into each with a z-buffer,
+towards the base view's axis. The median leaves out the sky: points at >= 0.999 x the 99th
+percentile of P_s's radii, which is point_cloud's far shell whenever the sky covers more than 1% of
+the panorama (then it also drops sky pixels the depth stage left finite and farther still; with no
+sky it drops the farthest 1% of the geometry, which barely moves a median). So an outdoor view's
+offset follows its ground and objects, not the sky. P_s (point_cloud's ps.ply) is projected into each with a z-buffer,
 nearest point wins, each point covering (2 R - 1)^2 pixels: R = ``splat_radius``, or with 0 (auto) each
 point's own footprint (holoflow.geometry.pointcloud.footprint_radius, from P_s's angular step
 2 pi / width, width = sqrt(2 N) since P_s keeps every pixel of its width x width/2 grid), so the
@@ -23,7 +25,7 @@ import math
 import os
 
 
-SHELL_REL = 0.999  # points at >= this fraction of the cloud's largest radius are sky (the far shell)
+FAR_QUANTILE, SHELL_REL = 0.99, 0.999  # points at >= 0.999 x the radii's 99th percentile are "sky"
 
 
 def main() -> int:
@@ -71,7 +73,7 @@ def main() -> int:
         return radius if radius > 0 else footprint_radius(points, viewmat, K, spacing)
 
     r = torch.linalg.vector_norm(pts, dim=-1)  # [N] m
-    solid = r < SHELL_REL * r.max()  # not on point_cloud's far sky shell (the farthest radius there is)
+    solid = r < SHELL_REL * torch.quantile(r, FAR_QUANTILE)  # not the far sky shell, nor beyond it
     if not solid.any():
         solid = torch.ones_like(solid)
     geo, geo_rgb = pts[solid], linear[solid]  # [G, 3] each

@@ -137,10 +137,11 @@ def test_stage_reruns_are_byte_identical(stage_outputs, rgbd_dir, tmp_path):
 
 
 def test_pcd_set_offsets_ignore_the_sky_shell(tmp_path):
-    """Outdoors (upper hemisphere all sky), views looking up see mostly the far shell: their offset
-    still follows the geometry's median depth, never the sky's."""
+    """Outdoors (upper hemisphere all sky, a few sky pixels left finite at 5 km), views looking up see
+    mostly the far shell: their offset still follows the geometry's median depth, never the sky's."""
     rgb, depth = rgbd_pano(64, 128, torch.float64, "cpu")
     depth[:32] = float("inf")
+    depth[30:32, :10] = 5000.0  # sky pixels a depth network left finite (0.5%), far beyond the shell
     src = tmp_path / "rgbd"
     src.mkdir()
     write_rgb(src / "pano.exr", rgb.numpy().astype(np.float32), {"holoflow.stage": "detail"})
