@@ -438,7 +438,8 @@ class _Scheduler:
                         resources=r.resources.as_dict(), provenance=prov, replace=forced)
 
     def submit(self, job: _Job) -> None:
-        owner, name = job.waiters[0]
+        for st, name in job.waiters:              # "ran in" counts from the start, not the queue
+            st.t0[name] = time.monotonic()
         self.display.start_step(job.task.label, self.done + 1, self.total,
                                 f" (attempt {job.task.attempt})" if job.task.attempt > 1 else "")
         self.running[self.executor.submit(job.task)] = job
