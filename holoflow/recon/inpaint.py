@@ -13,8 +13,9 @@ observed, or that G0 does not cover, is filled by the inpainter. Its cost is tha
 of the sparse P_s projection are filled too; those are a pixel or two wide, and filling them from
 their neighbours changes almost nothing. Views whose mask is empty are passed through un-inpainted.
 
-Engines: ``opencv`` (classical, no weights; ``method`` telea | ns via ``cv2.inpaint``,
-fsr_fast | fsr_best via ``cv2.xphoto.inpaint``) and ``lama`` (``holoflow.engines.lama``). Images are
+Engines: ``opencv`` (classical, no weights; ``method`` background = ``background_fill`` then telea
+for what it cannot reach, telea | ns via ``cv2.inpaint``, fsr_fast | fsr_best via
+``cv2.xphoto.inpaint``) and ``lama`` (``holoflow.engines.lama``). Images are
 display-referred sRGB [N, H, W, 3] in [0, 1]: the inpainters are built for display images. Observed
 pixels are returned bit-exact; only missing pixels change.
 """
@@ -130,7 +131,7 @@ def inpaint_views(images: np.ndarray, masks: np.ndarray, engine: str, params: di
     out = images.copy()
     if len(todo) == 0:
         return out
-    method = params.get("method", "telea")
+    method = params.get("method", "background")
     if engine == "opencv" and method == "background":
         if depths is None:
             raise ValueError("inpaint: method 'background' needs the rendered depth")
