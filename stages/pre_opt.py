@@ -8,8 +8,8 @@ def main() -> int:
 
     job = Job.from_argv()
     from holoflow.io.ply import read_points
-    from holoflow.recon.schedule import pre_optimize, score_views
-    from holoflow.recon.views import dumps_log, load_view_set
+    from holoflow.recon.schedule import pre_optimize, save_result
+    from holoflow.recon.views import load_view_set
 
     p = job.params
     for key in ("pcd_iters", "pano_iters"):
@@ -20,14 +20,7 @@ def main() -> int:
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
     model, log = pre_optimize(xyz, rgb, pcd_views, pano_views, p, job.engine, job.seed,
                               progress=lambda d, n: job.progress(d, n, "iters"))
-    model.save_ply(job.output("gaussians.ply"))
-    log["fit"] = {"pano": score_views(model, pano_views, job.engine)}     # G0 at the base cameras
-    seconds = log.pop("seconds")                                         # wall time: meta, not the artifact
-    job.output("train_log.json").write_text(dumps_log(log))
-    last = log["phases"][-1]["train"] if log["phases"] else {}
-    job.meta(gaussians=len(model), final_loss=last["loss"][-1] if last.get("loss") else None,
-             psnr_pano=log["fit"]["pano"]["psnr"], ssim_pano=log["fit"]["pano"]["ssim"], backend=job.engine,
-             phase_seconds=seconds)
+    save_result(job, model, log, pano_views, "gaussians.ply")     # G0, its fit and train_log.json
     return 0
 
 

@@ -10,8 +10,8 @@ def main() -> int:
     job = Job.from_argv()
     from holoflow.io.ply import read_points
     from holoflow.recon.preview import write_previews
-    from holoflow.recon.schedule import score_views, transfer_optimize
-    from holoflow.recon.views import dumps_log, load_view_set
+    from holoflow.recon.schedule import save_result, transfer_optimize
+    from holoflow.recon.views import load_view_set
 
     p = job.params
     if int(p["iters"]) < 0:
@@ -21,16 +21,9 @@ def main() -> int:
     inp_views, _ = load_view_set(job.input("inp"), alpha_is_mask=False) if p.get("use_inp", True) else ([], None)
     model, log = transfer_optimize(xyz, rgb, pano_views, inp_views, p, job.engine, job.seed,
                                    progress=lambda d, n: job.progress(d, n, "iters"))
-    model.save_ply(job.output("scene.ply"))
-    log["fit"] = {"pano": score_views(model, pano_views, job.engine)}     # G1 at the base cameras
-    seconds = log.pop("seconds")                                         # wall time: meta, not the artifact
-    job.output("train_log.json").write_text(dumps_log(log))
+    save_result(job, model, log, pano_views, "scene.ply")         # G1, its fit and train_log.json
     write_previews(model, job.output_dir / "previews", pano_views[0]["K"], job.engine,
                    size=int(p.get("preview_size", 128)))
-    last = log["phases"][-1]["train"] if log["phases"] else {}
-    job.meta(gaussians=len(model), final_loss=last["loss"][-1] if last.get("loss") else None,
-             psnr_pano=log["fit"]["pano"]["psnr"], ssim_pano=log["fit"]["pano"]["ssim"], backend=job.engine,
-             phase_seconds=seconds)
     return 0
 
 

@@ -143,3 +143,19 @@ def score_views(model, views: list[dict], backend: str) -> dict:
     return dict(psnr=None if math.isnan(p) else p,
                 ssim=metrics.ssim(rgb, target) if mask is None else None,    # SSIM windows ignore masks
                 empty_fraction=metrics.empty_fraction(alpha))
+
+
+def save_result(job, model, log: dict, pano_views: list[dict], ply_name: str) -> None:
+    """The end of pre_opt / transfer_opt: ``model`` as ``ply_name`` (3DGS layout), its fit at the base
+    cameras into ``log["fit"]``, train_log.json without the wall times (those, the fit and the final
+    loss go to the key record's meta), so the artifact's bytes depend on the inputs only."""
+    from holoflow.recon.views import dumps_log
+
+    model.save_ply(job.output(ply_name))
+    log["fit"] = {"pano": score_views(model, pano_views, job.engine)}
+    seconds = log.pop("seconds")
+    job.output("train_log.json").write_text(dumps_log(log))
+    last = log["phases"][-1]["train"] if log["phases"] else {}
+    job.meta(gaussians=len(model), final_loss=last["loss"][-1] if last.get("loss") else None,
+             psnr_pano=log["fit"]["pano"]["psnr"], ssim_pano=log["fit"]["pano"]["ssim"], backend=job.engine,
+             phase_seconds=seconds)
