@@ -38,16 +38,21 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float = 0.1):
 
 def train_config(iterations: int, params: dict, backend: str):
     """A ``holoflow.splat.TrainConfig`` for one phase from a stage's params: ``densify_every``,
-    ``densify_from`` (densification runs at steps densify_from < it <= iterations - densify_every),
+    ``densify_from`` and ``densify_stop`` (densification runs at steps densify_from < it <=
+    min(densify_stop x iterations, iterations - densify_every)),
     ``opacity_reset_every`` (0 = never, the paper) and ``max_gaussians``; ``backend`` is the
     rasterizer (the stage's engine)."""
     from holoflow.splat import TrainConfig
 
-    every = int(params.get("densify_every", 100))
-    # the last densification leaves at least ``every`` steps to train what it added
-    return TrainConfig(iterations=int(iterations), densify_every=every,
+    every, iters = int(params.get("densify_every", 100)), int(iterations)
+    stop = float(params.get("densify_stop", 0.5))
+    if not 0.0 <= stop <= 1.0:
+        raise ValueError(f"densify_stop must be in [0, 1], got {stop}")
+    # densification ends at densify_stop x iterations (3DGS: 15k of 30k) and leaves at least
+    # ``every`` steps to train what it added last
+    return TrainConfig(iterations=iters, densify_every=every,
                        densify_from=int(params.get("densify_from", 500)),
-                       densify_until=max(1, int(iterations) - every + 1),
+                       densify_until=max(1, min(int(stop * iters), iters - every) + 1),
                        opacity_reset_every=int(params.get("opacity_reset_every", 0)),
                        max_gaussians=int(params.get("max_gaussians", 2_000_000)), backend=backend)
 

@@ -154,3 +154,17 @@ def test_inp_set_lama_without_weights_is_one_line_error(chain, tmp_path):
     proc = subprocess.run([sys.executable, str(ROOT / "stages" / "inp_set.py"), str(job)],
                           capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert proc.returncode != 0 and proc.stderr.strip().count("\n") == 0, proc.stderr
+
+
+@pytest.mark.parametrize("iters, stop, steps", [(200, 0.5, [50, 100]), (200, 1.0, [50, 100, 150]),
+                                                (100, 0.5, [50]), (60, 0.5, []), (2000, 0.0, [])])
+def test_densification_stops_at_densify_stop(iters, stop, steps):
+    """Densify at densify_from < step <= min(densify_stop x iters, iters - densify_every)."""
+    from holoflow.recon.schedule import train_config
+
+    cfg = train_config(iters, {"densify_every": 50, "densify_from": 40, "densify_stop": stop}, "cpu")
+    got = [it for it in range(1, iters + 1)
+           if cfg.densify_from < it < cfg.densify_until and it % cfg.densify_every == 0]
+    assert got == steps
+    with pytest.raises(ValueError, match="densify_stop"):
+        train_config(iters, {"densify_stop": 1.5}, "cpu")
