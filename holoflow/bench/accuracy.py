@@ -50,9 +50,12 @@ class Point:
     profile: str = "eval"
 
 
-def _iters(scale: float, pcd: int, pano: int, transfer: int) -> tuple[str, ...]:
-    return (f"pre_opt.pcd_iters={round(pcd * scale)}", f"pre_opt.pano_iters={round(pano * scale)}",
-            f"transfer_opt.iters={round(transfer * scale)}")
+def _iters(scale: float, profile: str = "eval") -> tuple[str, ...]:
+    """Overrides scaling the profile's pre_opt and transfer_opt iteration counts by ``scale``."""
+    p = resolved_params(profile, [])
+    return (f"pre_opt.pcd_iters={round(p['pre_opt']['pcd_iters'] * scale)}",
+            f"pre_opt.pano_iters={round(p['pre_opt']['pano_iters'] * scale)}",
+            f"transfer_opt.iters={round(p['transfer_opt']['iters'] * scale)}")
 
 
 def _pano(width: int) -> tuple[str, ...]:
@@ -69,8 +72,8 @@ def full_points() -> list[Point]:
     off = ("pre_opt.densify_from=1000000", "transfer_opt.densify_from=1000000")
     return [
         Point("base", "base", "eval", ()),
-        Point("iters-x0.25", "iterations", "x0.25", _iters(0.25, 100, 100, 200)),
-        Point("iters-x0.5", "iterations", "x0.5", _iters(0.5, 100, 100, 200)),
+        Point("iters-x0.25", "iterations", "x0.25", _iters(0.25)),
+        Point("iters-x0.5", "iterations", "x0.5", _iters(0.5)),
         Point("points-128", "point density", "P_f 128", ("point_cloud.pf_width=128",)),
         Point("views-32", "view size", "32 px", ("pano_set.size=32",)),
         Point("no-densify", "densify", "off", off),
@@ -79,7 +82,7 @@ def full_points() -> list[Point]:
         Point("cameras-20", "base cameras", "20 @ 70 deg", ("pano_set.cameras=20", "pano_set.fov_deg=70")),
         Point("pano-512", "pano res", "512x256", _pano(512)),
         Point("preview", "profile", "preview (neutral)", tuple(NEUTRAL), profile="preview"),
-        Point("iters-x2", "iterations", "x2", _iters(2, 100, 100, 200)),
+        Point("iters-x2", "iterations", "x2", _iters(2)),
         Point("views-96", "view size", "96 px", ("pano_set.size=96",)),
         Point("grid-4x4", "align grid", "4x4", ("tangent_depth.grid=[4, 4]",)),
         Point("cameras-26", "base cameras", "26 @ 60 deg", ("pano_set.cameras=26", "pano_set.fov_deg=60")),
@@ -92,7 +95,7 @@ def full_points() -> list[Point]:
 def quick_points() -> list[Point]:
     """Three tiny points: a base, fewer iterations (reuses every upstream stage), no densification."""
     return [Point("base", "base", "tiny", tuple(NEUTRAL), "tiny"),
-            Point("iters-x0.5", "iterations", "x0.5", tuple(NEUTRAL) + _iters(0.5, 10, 10, 10), "tiny"),
+            Point("iters-x0.5", "iterations", "x0.5", tuple(NEUTRAL) + _iters(0.5, "tiny"), "tiny"),
             Point("no-densify", "densify", "off", tuple(NEUTRAL) + ("pre_opt.densify_from=1000000",
                                                                    "transfer_opt.densify_from=1000000"), "tiny")]
 
