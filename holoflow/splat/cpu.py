@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import types
 
+import numba
 import numpy as np
 import torch
 from numba import njit, prange
@@ -56,25 +57,28 @@ def _boxes(visible, means2d, extent, opac, width, height, box):
     return keep
 
 
-@njit(cache=True)
-def _bin_tiles(order, box, means2d, conics, opac, feats, width, height):
+@njit(parallel=True, cache=True)
+def _bin_tiles(order, box, means2d, conics, opac, feats, width, height, chunks):
     """Pack the on-screen Gaussians front to back and list them per tile.
 
     order [n] on-screen Gaussians front to back; box [N, 4] from ``_boxes``; means2d [N, 2] px;
     conics [N, 3]; opac [N]; feats [N, F]. Returns rec [n, 7] (mx, my, a, b, c, o, sigma bound
     ln(255 o) + 1e-6), pbox [n, 4] (packed boxes), ft [n, F] (float64), offsets [tiles + 1],
     ids [M] (packed index, ascending = front to back within each tile; tiles row-major),
-    pstart [n + 1] and ent [M] (each Gaussian's entries, by tile)."""
+    pstart [n + 1] and ent [M] (each Gaussian's entries, by tile).
+
+    A stable counting sort in ``chunks`` contiguous runs of the packed order: each run counts its
+    entries per tile, a prefix over (tile, run) places the runs one after another inside every tile,
+    then each run writes its entries. The lists are the same for any ``chunks``."""
     n = order.shape[0]
     F = feats.shape[1]
     ntx = (width + TILE - 1) // TILE
-    nty = (height + TILE - 1) // TILE
+    ntiles = ntx * ((height + TILE - 1) // TILE)
     rec = np.empty((n, 7))
     pbox = np.empty((n, 4), np.int64)
     ft = np.empty((n, F))
-    counts = np.zeros(ntx * nty + 1, np.int64)
     pstart = np.zeros(n + 1, np.int64)          # entries of Gaussian p: ent[pstart[p]:pstart[p + 1]]
-    for p in range(n):
+    for p in prange(n):
         g = order[p]
         rec[p, 0], rec[p, 1] = means2d[g, 0], means2d[g, 1]
         rec[p, 2], rec[p, 3], rec[p, 4] = conics[g, 0], conics[g, 1], conics[g, 2]
@@ -84,24 +88,36 @@ def _bin_tiles(order, box, means2d, conics, opac, feats, width, height):
             ft[p, f] = feats[g, f]
         for j in range(4):
             pbox[p, j] = box[g, j]
-        tx0, tx1, ty0, ty1 = box[g, 0] // TILE, box[g, 1] // TILE, box[g, 2] // TILE, box[g, 3] // TILE
-        pstart[p + 1] = pstart[p] + (tx1 - tx0 + 1) * (ty1 - ty0 + 1)
-        for ty in range(ty0, ty1 + 1):
-            for tx in range(tx0, tx1 + 1):
-                counts[ty * ntx + tx + 1] += 1
-    offsets = np.cumsum(counts)
-    pos = offsets[:-1].copy()
+        pstart[p + 1] = (box[g, 1] // TILE - box[g, 0] // TILE + 1) * (box[g, 3] // TILE - box[g, 2] // TILE + 1)
+    for p in range(n):
+        pstart[p + 1] += pstart[p]
+    step = (n + chunks - 1) // max(chunks, 1)
+    counts = np.zeros((chunks, ntiles), np.int64)
+    for c in prange(chunks):
+        for p in range(c * step, min(n, (c + 1) * step)):
+            for ty in range(pbox[p, 2] // TILE, pbox[p, 3] // TILE + 1):
+                for tx in range(pbox[p, 0] // TILE, pbox[p, 1] // TILE + 1):
+                    counts[c, ty * ntx + tx] += 1
+    offsets = np.zeros(ntiles + 1, np.int64)
+    pos = np.empty((chunks, ntiles), np.int64)  # where run c writes its next entry of tile t
+    for t in range(ntiles):
+        at = offsets[t]
+        for c in range(chunks):
+            pos[c, t] = at
+            at += counts[c, t]
+        offsets[t + 1] = at
     ids = np.empty(offsets[-1], np.int64)
     ent = np.empty(offsets[-1], np.int64)
-    for p in range(n):
-        i = pstart[p]
-        for ty in range(pbox[p, 2] // TILE, pbox[p, 3] // TILE + 1):
-            for tx in range(pbox[p, 0] // TILE, pbox[p, 1] // TILE + 1):
-                t = ty * ntx + tx
-                ids[pos[t]] = p
-                ent[i] = pos[t]
-                pos[t] += 1
-                i += 1
+    for c in prange(chunks):
+        for p in range(c * step, min(n, (c + 1) * step)):
+            i = pstart[p]
+            for ty in range(pbox[p, 2] // TILE, pbox[p, 3] // TILE + 1):
+                for tx in range(pbox[p, 0] // TILE, pbox[p, 1] // TILE + 1):
+                    t = ty * ntx + tx
+                    ids[pos[c, t]] = p
+                    ent[i] = pos[c, t]
+                    pos[c, t] += 1
+                    i += 1
     return rec, pbox, ft, offsets, ids, pstart, ent
 
 
@@ -287,6 +303,7 @@ def serial_twin(dispatcher):
 
 
 _boxes_serial = serial_twin(_boxes)
+_bin_tiles_serial = serial_twin(_bin_tiles)
 _forward_serial = serial_twin(_forward)
 _backward_serial = serial_twin(_backward)
 _gather_grads_serial = serial_twin(_gather_grads)
@@ -310,10 +327,13 @@ def bin_camera(means2d, conics, opac, feats, depths, visible, extent, width, hei
     pack = (rec, pbox, ft, offsets, ids, pstart, ent) as ``_bin_tiles``."""
     N = means2d.shape[0]
     box = np.empty((N, 4), np.int64)
-    cull = _boxes if N >= PARALLEL_MIN_GAUSSIANS else _boxes_serial
-    keep = cull(visible, means2d, extent, opac, width, height, box)
+    keep = (_boxes if N >= PARALLEL_MIN_GAUSSIANS else _boxes_serial)(visible, means2d, extent, opac,
+                                                                    width, height, box)
     order = depth_order(depths, keep)
-    return order, _bin_tiles(order, box, means2d, conics, opac, feats, width, height)
+    if len(order) >= PARALLEL_MIN_GAUSSIANS:
+        return order, _bin_tiles(order, box, means2d, conics, opac, feats, width, height,
+                                 4 * numba.get_num_threads())
+    return order, _bin_tiles_serial(order, box, means2d, conics, opac, feats, width, height, 1)
 
 
 def count_pairs(means2d, conics, opac, feats, depths, visible, extent, width, height) -> int:

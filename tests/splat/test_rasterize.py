@@ -80,6 +80,30 @@ def test_deterministic():
     assert torch.equal(a["rgb"], b["rgb"]) and all(torch.equal(ga[k], gb[k]) for k in NAMES)
 
 
+@pytest.mark.parametrize("chunks", [1, 3, 8, 64])
+def test_tile_binning_is_the_same_for_any_chunk_count(chunks):
+    """The parallel counting sort gives the serial one's lists: per tile ascending packed index."""
+    import numpy as np
+
+    from holoflow.splat import cpu
+
+    g = np.random.default_rng(chunks)
+    N, W, H = 500, 70, 45
+    m2 = g.uniform(-10, 80, (N, 2))
+    ext = g.uniform(0.5, 30, (N, 2))
+    box = np.empty((N, 4), np.int64)
+    keep = cpu._boxes_serial(np.ones(N, np.bool_), m2, ext, g.uniform(0.01, 1, N), W, H, box)
+    order = cpu.depth_order(g.uniform(1, 5, N).astype(np.float32), keep)
+    args = (order, box, m2, g.normal(size=(N, 3)), g.uniform(0.01, 1, N), g.normal(size=(N, 4)), W, H)
+    ref = cpu._bin_tiles_serial(*args, 1)
+    got = cpu._bin_tiles(*args, chunks)
+    for a, b in zip(ref, got):
+        assert np.array_equal(a, b)
+    rec, pbox, ft, offsets, ids, pstart, ent = ref
+    assert all(np.all(np.diff(ids[offsets[t]:offsets[t + 1]]) > 0) for t in range(len(offsets) - 1))
+    assert np.array_equal(np.sort(ent), np.arange(len(ids)))      # every entry owned exactly once
+
+
 def _hard_scene(case, dtype=torch.float64):
     p = {k: v.detach() for k, v in random_scene(12, 7, dtype).items()}
     vm, K = cameras(16, 12, dtype, n=1)
