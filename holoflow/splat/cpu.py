@@ -88,10 +88,11 @@ def _bin_tiles(order, box, means2d, conics, opac, feats, width, height, chunks):
             ft[p, f] = feats[g, f]
         for j in range(4):
             pbox[p, j] = box[g, j]
-        pstart[p + 1] = (box[g, 1] // TILE - box[g, 0] // TILE + 1) * (box[g, 3] // TILE - box[g, 2] // TILE + 1)
+        pstart[p + 1] = ((box[g, 1] // TILE - box[g, 0] // TILE + 1)         # tiles its box meets
+                         * (box[g, 3] // TILE - box[g, 2] // TILE + 1))
     for p in range(n):
         pstart[p + 1] += pstart[p]
-    step = (n + chunks - 1) // max(chunks, 1)
+    step = (n + chunks - 1) // chunks           # run c: packed indices [c step, (c + 1) step)
     counts = np.zeros((chunks, ntiles), np.int64)
     for c in prange(chunks):
         for p in range(c * step, min(n, (c + 1) * step)):
