@@ -1,5 +1,6 @@
 """inp_set: G0 rendered at every supplementary camera; missing pixels (rendered alpha below
-alpha_threshold, or no point landed in the PCD set) filled by the inpainting engine. Writes
+alpha_threshold, or no point of P_s landed: the PCD set's ``seen`` channel, or its A where a PCD set
+made elsewhere has none) filled by the inpainting engine. Writes
 views/NNN_K.exr (R,G,B inpainted, linear; A = 1 observed, 0 inpainted), renders/NNN_K.exr (G0's render
 before inpainting: R,G,B + A = rendered alpha, for inspection), cameras.json, transforms.json."""
 from __future__ import annotations
@@ -12,6 +13,7 @@ def main() -> int:
     import numpy as np
     import torch
 
+    from holoflow.io.exr import read_exr
     from holoflow.recon.inpaint import inpaint_views, missing_mask
     from holoflow.recon.schedule import render_views
     from holoflow.recon.views import load_view_set, write_images, write_view_set
@@ -22,8 +24,9 @@ def main() -> int:
     views, cams = load_view_set(job.input("pcd"), alpha_is_mask=True)
     rgb, alpha, depth = render_views(model, views, "auto", with_depth=True)   # [N, H, W, 3], 2 x [N, H, W, 1]
     rgb, alpha, depth = rgb.numpy(), alpha[..., 0].numpy(), depth[..., 0].numpy()
-    pcd_valid = torch.stack([v["mask"] for v in views]).numpy()            # [N, H, W]
-    missing = missing_mask(alpha, pcd_valid, float(p["alpha_threshold"]))
+    pcd_seen = np.stack([read_exr(job.input("pcd") / cam["file"])[0].get("seen", view["mask"].numpy())
+                         for view, cam in zip(views, cams["views"])])          # [N, H, W] 1 = a point landed
+    missing = missing_mask(alpha, pcd_seen, float(p["alpha_threshold"]))
     filled = inpaint_views(rgb, missing, job.engine, p, job.device, progress=job.progress, depths=depth)
     write_view_set(job.output_dir, cams, filled, (~missing).astype(np.float32), "inp_set")
     write_images(job.output_dir, [v["file"].replace("views/", "renders/", 1) for v in cams["views"]],

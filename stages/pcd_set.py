@@ -13,11 +13,15 @@ point's own footprint (holoflow.geometry.pointcloud.footprint_radius, from P_s's
 2 pi / width, width = sqrt(2 N) since P_s keeps every pixel of its width x width/2 grid), so the
 missing pixels are disocclusions rather than sampling gaps. Points of P_s on occlusion edges (relative
 depth gradient over ``edge_threshold``, the measure point_cloud filters P_f with; 0 = keep all) are left
-out: P_s is made from the unfiltered P0, so its edge points are the depth-mixed "rubber sheet" between
-a foreground object and what lies behind it, which would otherwise paint the disocclusion with smeared
-colour and hide it from the mask. Writes views/NNN_K.exr
-(R,G,B linear; A = 1 where a point landed, 0 = missing; K = 0 above, 1 below, 2 left, 3 right),
-cameras.json (kind "supplementary", base = base camera index) and transforms.json.
+out of the image: P_s is made from the unfiltered P0, so its edge points are the depth-mixed "rubber
+sheet" between a foreground object and what lies behind it, which would otherwise paint the
+disocclusion with smeared colour. The same test also flags surfaces seen at grazing incidence (at a
+256 px wide P_s, ground beyond ~25 m from a 1.6 m eye, and every horizon), so the edge points are
+projected on their own into the ``seen`` channel: 1 where any point of P_s landed. inp_set inpaints
+where nothing was seen, not where only edge points were (docs/reconstruction.md). Writes
+views/NNN_K.exr (R,G,B linear; A = 1 where a non-edge point landed, 0 = missing: pre_opt's loss mask;
+seen = 1 where any point landed; K = 0 above, 1 below, 2 left, 3 right), cameras.json (kind
+"supplementary", base = base camera index) and transforms.json.
 """
 from __future__ import annotations
 
@@ -57,13 +61,14 @@ def main() -> int:
     pts = torch.from_numpy(xyz).to(device).double()  # [N, 3]
     srgb = torch.from_numpy(rgb8).to(device).float() / 255.0  # [N, 3]
     edge = float(p.get("edge_threshold", 0.0))
+    edge_pts = pts[:0]  # [E, 3] P_s's edge points: left out of the image, kept for the seen mask
     if edge > 0:  # P_s is a full equirect grid, row-major: width = sqrt(2 N)
         w = int(round(math.sqrt(2 * len(xyz))))
         if w * (w // 2) != len(xyz):
             raise ValueError(f"ps.ply: {len(xyz)} points are not a full equirect grid (edge_threshold needs one)")
         grad = depth_gradient(torch.linalg.vector_norm(pts, dim=-1).reshape(w // 2, w))  # [H, W]
         keep = (torch.nan_to_num(grad, nan=float("inf")) <= edge).reshape(-1)  # [N]
-        pts, srgb = pts[keep], srgb[keep]
+        pts, srgb, edge_pts = pts[keep], srgb[keep], pts[~keep]
     n_edge = len(xyz) - len(pts)
     linear = kornia.color.rgb_to_linear_rgb(srgb.T[:, :, None])[:, :, 0].T  # [N, 3] linear light
     M = base_V.shape[0]
@@ -84,24 +89,31 @@ def main() -> int:
         medians.append(float(zs.median()) if zs.numel() else float(r[solid].median()))
     medians_t = torch.tensor(medians, dtype=torch.float64, device=device)
     sup = supplementary_rig(base_V, medians_t, offset, angle)  # [4 M, 4, 4]
-    names, files, bases, missing = [], [], [], []
+    names, files, bases, missing, unseen = [], [], [], [], []
     for j in range(4 * M):
         b, k = divmod(j, 4)
         img, hit, _ = project_points_zbuffer(pts, linear, K, sup[j], H, W, radii(sup[j]))
+        seen = hit
+        if len(edge_pts):
+            _, edge_hit, _ = project_points_zbuffer(edge_pts, edge_pts[:, :1], K, sup[j], H, W,
+                                                    radii(sup[j], edge_pts))
+            seen = torch.maximum(hit, edge_hit)
         name = f"{base['views'][b]['name']}_{k}"
         names.append(name)
         files.append(f"views/{name}.exr")
         bases.append(b)
         missing.append(1.0 - float(hit.mean()))
+        unseen.append(1.0 - float(seen.mean()))
         write_rgb(job.output(files[-1]), img.float().cpu().numpy(),
                   {"holoflow.stage": "pcd_set", "holoflow.camera": name, "holoflow.side": SUPPLEMENTARY[k]},
-                  A=hit.float().cpu().numpy())
+                  A=hit.float().cpu().numpy(), seen=seen.float().cpu().numpy())
         job.progress(j + 1, 4 * M, "views")
     cams = cameras_json(K, sup, W, H, names, files, kinds=["supplementary"] * (4 * M), bases=bases)
     write_cameras(job.output("cameras.json"), cams)
     write_transforms(job.output("transforms.json"), cams)
     job.meta(views=4 * M, points=int(len(xyz)), edge_points_dropped=n_edge,
              missing_fraction=round(sum(missing) / len(missing), 6),
+             unseen_fraction=round(sum(unseen) / len(unseen), 6),
              splat_radius=radius if radius > 0 else "auto",
              median_depth=[round(m, 4) for m in medians])
     return 0

@@ -2,16 +2,17 @@
 
 Missing mask (1 = missing), per supplementary view:
 
-    missing = (rendered alpha < alpha_threshold)  OR  (PCD mask says no point landed)
+    missing = (rendered alpha < alpha_threshold)  OR  (no point of P_s landed: the PCD set's ``seen``)
 
 Why both. Rendered alpha alone misses disocclusions: the PCD phase of pre_opt leaves hole pixels
 unsupervised and the PANO phase sees them only from the centre, so G0 is free to put stretched,
 opaque Gaussians there (foreground edges smeared into the gap) and alpha is high over wrong content.
 The PCD mask alone (the paper's M_ij, taken literally) misses what G0 failed to cover where points did
-land, and says nothing about G0. Their union is the conservative choice: every pixel that nothing
-observed, or that G0 does not cover, is filled by the inpainter. Its cost is that sampling pinholes
-of the sparse P_s projection are filled too; those are a pixel or two wide, and filling them from
-their neighbours changes almost nothing. Views whose mask is empty are passed through un-inpainted.
+land, and says nothing about G0. Their union fills every pixel that nothing observed, or that G0 does
+not cover. ``seen`` and not the PCD set's A: A also leaves out P_s's occlusion-edge points, and that
+test flags every surface seen at a grazing angle (far ground, each horizon); inpainting those pixels
+from their far side painted sky over the ground (docs/reconstruction.md). Views whose mask is empty
+are passed through un-inpainted.
 
 Engines: ``opencv`` (classical, no weights; ``method`` background = ``background_fill`` then telea
 for what it cannot reach, telea | ns via ``cv2.inpaint``, fsr_fast | fsr_best via

@@ -104,7 +104,8 @@ def test_pcd_set_stage(stage_outputs):
     assert [v["base"] for v in cams["views"][:8]] == [0, 0, 0, 0, 1, 1, 1, 1]
     assert cams["views"][5]["name"] == "001_1"
     ch, _ = read_exr(out / cams["views"][0]["file"])
-    assert set(ch) == {"R", "G", "B", "A"} and set(np.unique(ch["A"])) <= {0.0, 1.0}
+    assert set(ch) == {"R", "G", "B", "A", "seen"} and set(np.unique(ch["A"])) <= {0.0, 1.0}
+    assert np.array_equal(ch["seen"], ch["A"])  # no edge filter: every landed point is in the image
     hits = np.mean([read_exr(out / v["file"])[0]["A"].mean() for v in cams["views"]])
     assert hits > 0.9  # automatic splat radii: only disocclusions stay empty
     meta = [json.loads(ln[6:]) for ln in pcd.stdout.splitlines() if ln.startswith("@meta ")][0]
@@ -134,6 +135,35 @@ def test_stage_reruns_are_byte_identical(stage_outputs, rgbd_dir, tmp_path):
         assert files and files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
         for f in files:
             assert (a / f).read_bytes() == (b / f).read_bytes(), f"{stage}: {f} differs on rerun"
+
+
+def test_pcd_set_edge_points_leave_the_image_but_mark_pixels_seen(stage_outputs, tmp_path):
+    """With edge_threshold > 0, P_s's edge points (the ball's silhouette, the horizon of the sky) leave
+    the image and A, yet their pixels stay ``seen``: seen is exactly where the unfiltered P_s lands."""
+    import math
+
+    from holoflow.geometry.pointcloud import footprint_radius, project_points_zbuffer
+
+    tmp, _, _, plain = stage_outputs
+    assert plain is not None and plain.returncode == 0
+    edged = run_stage(tmp_path, "pcd_set", {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0, "edge_threshold": 0.4},
+                      {"cloud": tmp / "point_cloud_out", "cameras": tmp / "pano_set_out"})
+    assert edged.returncode == 0, edged.stderr
+    xyz = torch.from_numpy(read_points(tmp / "point_cloud_out" / "ps.ply")[0]).double()
+    spacing = 2 * math.pi / math.sqrt(2 * len(xyz))
+    cams = read_cameras(tmp_path / "pcd_set_out" / "cameras.json")
+    K, V = cameras_tensors(cams)
+    gained = 0
+    for v, vm in zip(cams["views"], V):
+        e, _ = read_exr(tmp_path / "pcd_set_out" / v["file"])
+        _, hit, _ = project_points_zbuffer(xyz, xyz[:, :1], K, vm, cams["height"], cams["width"],
+                                           footprint_radius(xyz, vm, K, spacing))
+        assert np.array_equal(e["seen"], hit.float().numpy())
+        assert (e["A"] <= e["seen"]).all()
+        gained += int((e["seen"] > e["A"]).sum())
+    assert gained > 0  # some pixels are seen only through edge points
+    meta = [json.loads(ln[6:]) for ln in edged.stdout.splitlines() if ln.startswith("@meta ")][0]
+    assert meta["edge_points_dropped"] > 0 and meta["unseen_fraction"] < meta["missing_fraction"]
 
 
 def test_pcd_set_offsets_ignore_the_sky_shell(tmp_path):

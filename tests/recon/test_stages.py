@@ -91,6 +91,33 @@ def test_inp_set_fills_every_missing_pixel_and_skips_complete_views(chain):
     assert meta["inpainted_views"] == inpainted
 
 
+def test_inp_set_inpaints_only_what_no_point_reached(chain, tmp_path):
+    """A PCD set with a ``seen`` channel (pcd_set with edge_threshold > 0): pixels a P_s edge point
+    reached (A = 0, seen = 1) keep G0's render; missing = rendered alpha < threshold OR seen = 0."""
+    import shutil
+
+    from holoflow.io.exr import write_exr
+
+    pcd = tmp_path / "pcd"
+    shutil.copytree(chain["inputs"]["pcd"], pcd)
+    cams = json.loads((pcd / "cameras.json").read_text())
+    for v in cams["views"]:
+        ch, attrs = read_exr(pcd / v["file"])
+        seen = ch["A"].copy()
+        seen[:, : seen.shape[1] // 2] = 1.0       # left half: reached by edge points only
+        write_exr(pcd / v["file"], {**ch, "seen": seen}, attrs)
+    inp, _ = run_stage(tmp_path, "inp_set", "opencv", {"alpha_threshold": 0.5, "method": "telea", "radius": 3,
+                                                        "model": ""}, {"gaussians": chain["pre"], "pcd": pcd})
+    kept = 0
+    for v in cams["views"]:
+        out, _ = read_exr(inp / v["file"])
+        ren, _ = read_exr(inp / v["file"].replace("views/", "renders/"))
+        p, _ = read_exr(pcd / v["file"])
+        assert np.array_equal(out["A"] == 0, (ren["A"] < 0.5) | (p["seen"] < 0.5))
+        kept += int(((p["A"] < 0.5) & (out["A"] == 1)).sum())
+    assert kept > 0     # holes of A that edge points reached were not inpainted
+
+
 def test_transfer_opt_writes_scene_and_previews(chain):
     from PIL import Image
 
