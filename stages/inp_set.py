@@ -1,6 +1,7 @@
-"""inp_set: G0 rendered at every supplementary camera; missing pixels (rendered alpha below
-alpha_threshold, or no point of P_s landed: the PCD set's ``seen`` channel, or its A where a PCD set
-made elsewhere has none) filled by the inpainting engine. Writes
+"""inp_set: G0 rendered at every supplementary camera; with ``observed: pcd`` the PCD set's own colour
+replaces the render wherever a point landed (its A); missing pixels (rendered alpha below
+alpha_threshold and no PCD colour, or no point of P_s landed at all: the PCD set's ``seen`` channel,
+or its A where a PCD set made elsewhere has none) filled by the inpainting engine. Writes
 views/NNN_K.exr (R,G,B inpainted, linear; A = 1 observed, 0 inpainted), renders/NNN_K.exr (G0's render
 before inpainting: R,G,B + A = rendered alpha, for inspection), cameras.json, transforms.json."""
 from __future__ import annotations
@@ -27,7 +28,14 @@ def main() -> int:
     pcd_seen = np.stack([read_exr(job.input("pcd") / cam["file"])[0].get("seen", view["mask"].numpy())
                          for view, cam in zip(views, cams["views"])])          # [N, H, W] 1 = a point landed
     missing = missing_mask(alpha, pcd_seen, float(p["alpha_threshold"]))
-    filled = inpaint_views(rgb, missing, job.engine, p, job.device, progress=job.progress, depths=depth)
+    observed = rgb
+    if p["observed"] == "pcd":    # the projection of P_s itself wherever a non-edge point landed
+        landed = torch.stack([v["mask"] for v in views]).numpy() > 0.5                 # [N, H, W]
+        observed = np.where(landed[..., None], torch.stack([v["image"] for v in views]).numpy(), rgb)
+        missing &= ~landed
+    elif p["observed"] != "render":
+        raise ValueError(f"inp_set: observed must be pcd or render, got {p['observed']!r}")
+    filled = inpaint_views(observed, missing, job.engine, p, job.device, progress=job.progress, depths=depth)
     write_view_set(job.output_dir, cams, filled, (~missing).astype(np.float32), "inp_set")
     write_images(job.output_dir, [v["file"].replace("views/", "renders/", 1) for v in cams["views"]],
                  rgb, alpha, "inp_set")

@@ -35,7 +35,7 @@ def chain(tmp_path_factory):
     pre, pre_log = run_stage(tmp, "pre_opt", "cpu", {"pcd_iters": 40, "pano_iters": 40, **TRAIN},
                              {"cloud": inputs["cloud"], "pcd": inputs["pcd"], "pano": inputs["pano"]})
     inp, inp_log = run_stage(tmp, "inp_set", "opencv",
-                             {"alpha_threshold": 0.5, "method": "telea", "radius": 3, "model": ""},
+                             {"alpha_threshold": 0.5, "method": "telea", "radius": 3, "model": "", "observed": "render"},
                              {"gaussians": pre, "pcd": inputs["pcd"]})
     tr, tr_log = run_stage(tmp, "transfer_opt", "cpu", {"iters": 80, "use_inp": True, "preview_size": 32, **TRAIN},
                            {"cloud": inputs["cloud"], "pano": inputs["pano"], "inp": inp})
@@ -91,9 +91,12 @@ def test_inp_set_fills_every_missing_pixel_and_skips_complete_views(chain):
     assert meta["inpainted_views"] == inpainted
 
 
-def test_inp_set_inpaints_only_what_no_point_reached(chain, tmp_path):
+@pytest.mark.parametrize("observed", ["render", "pcd"])
+def test_inp_set_inpaints_only_what_no_point_reached(chain, tmp_path, observed):
     """A PCD set with a ``seen`` channel (pcd_set with edge_threshold > 0): pixels a P_s edge point
-    reached (A = 0, seen = 1) keep G0's render; missing = rendered alpha < threshold OR seen = 0."""
+    reached (A = 0, seen = 1) keep G0's render. observed = render: missing = rendered alpha < threshold
+    OR seen = 0 (the paper's render everywhere else); observed = pcd: pixels where a point landed
+    (A = 1) carry the PCD set's colour and are never missing."""
     import shutil
 
     from holoflow.io.exr import write_exr
@@ -106,15 +109,23 @@ def test_inp_set_inpaints_only_what_no_point_reached(chain, tmp_path):
         seen = ch["A"].copy()
         seen[:, : seen.shape[1] // 2] = 1.0       # left half: reached by edge points only
         write_exr(pcd / v["file"], {**ch, "seen": seen}, attrs)
-    inp, _ = run_stage(tmp_path, "inp_set", "opencv", {"alpha_threshold": 0.5, "method": "telea", "radius": 3,
-                                                        "model": ""}, {"gaussians": chain["pre"], "pcd": pcd})
+    params = {"alpha_threshold": 0.5, "method": "telea", "radius": 3, "model": "", "observed": observed}
+    inp, _ = run_stage(tmp_path, "inp_set", "opencv", params, {"gaussians": chain["pre"], "pcd": pcd})
     kept = 0
     for v in cams["views"]:
         out, _ = read_exr(inp / v["file"])
         ren, _ = read_exr(inp / v["file"].replace("views/", "renders/"))
         p, _ = read_exr(pcd / v["file"])
-        assert np.array_equal(out["A"] == 0, (ren["A"] < 0.5) | (p["seen"] < 0.5))
-        kept += int(((p["A"] < 0.5) & (out["A"] == 1)).sum())
+        landed = p["A"] >= 0.5
+        missing = (ren["A"] < 0.5) | (p["seen"] < 0.5)
+        rgb, src = np.stack([out[c] for c in "RGB"], -1), np.stack([(p if observed == "pcd" else ren)[c] for c in "RGB"], -1)
+        if observed == "pcd":
+            missing &= ~landed
+            np.testing.assert_allclose(rgb[landed], src[landed], atol=2e-3)   # through sRGB and back
+        else:
+            assert np.array_equal(rgb[~missing], src[~missing])
+        assert np.array_equal(out["A"] == 0, missing)
+        kept += int((~landed & (out["A"] == 1)).sum())
     assert kept > 0     # holes of A that edge points reached were not inpainted
 
 
@@ -165,7 +176,7 @@ def test_inp_set_lama_engine_through_the_stage(chain, tmp_path):
 
     weights = save_lama(tmp_path / "big-lama-tiny.safetensors")
     out, log = run_stage(tmp_path, "inp_set", "lama", {"alpha_threshold": 0.5, "method": "telea", "radius": 3,
-                                                       "model": str(weights)},
+                                                       "model": str(weights), "observed": "pcd"},
                          {"gaussians": chain["pre"], "pcd": chain["inputs"]["pcd"]})
     meta = _meta(log)
     assert meta["inpainted_views"] > 0 and meta["engine"] == "lama"
@@ -176,7 +187,7 @@ def test_inp_set_lama_engine_through_the_stage(chain, tmp_path):
 
 def test_inp_set_lama_without_weights_is_one_line_error(chain, tmp_path):
     job = synth.job_spec(tmp_path, "inp_set", "lama", {"alpha_threshold": 0.5, "method": "telea", "radius": 3,
-                                                       "model": str(tmp_path / "nothing-here")},
+                                                       "model": str(tmp_path / "nothing-here"), "observed": "render"},
                          {"gaussians": chain["pre"], "pcd": chain["inputs"]["pcd"]})
     proc = subprocess.run([sys.executable, str(ROOT / "stages" / "inp_set.py"), str(job)],
                           capture_output=True, text=True, timeout=60, cwd=ROOT)
