@@ -14,7 +14,6 @@ def main() -> int:
     import numpy as np
     import torch
 
-    from holoflow.io.exr import read_exr
     from holoflow.recon.inpaint import inpaint_views, missing_mask
     from holoflow.recon.schedule import render_views
     from holoflow.recon.views import load_view_set, write_images, write_view_set
@@ -25,8 +24,7 @@ def main() -> int:
     views, cams = load_view_set(job.input("pcd"), alpha_is_mask=True)
     rgb, alpha, depth = render_views(model, views, "auto", with_depth=True)   # [N, H, W, 3], 2 x [N, H, W, 1]
     rgb, alpha, depth = rgb.numpy(), alpha[..., 0].numpy(), depth[..., 0].numpy()
-    pcd_seen = np.stack([read_exr(job.input("pcd") / cam["file"])[0].get("seen", view["mask"].numpy())
-                         for view, cam in zip(views, cams["views"])])          # [N, H, W] 1 = a point landed
+    pcd_seen = torch.stack([v.get("seen", v["mask"]) for v in views]).numpy()  # [N, H, W] 1 = a point landed
     missing = missing_mask(alpha, pcd_seen, float(p["alpha_threshold"]))
     observed = rgb
     if p["observed"] == "pcd":    # the projection of P_s itself wherever a non-edge point landed

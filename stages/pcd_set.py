@@ -95,7 +95,7 @@ def main() -> int:
         img, hit, _ = project_points_zbuffer(pts, linear, K, sup[j], H, W, radii(sup[j]))
         seen = hit
         if len(edge_pts):
-            _, edge_hit, _ = project_points_zbuffer(edge_pts, edge_pts[:, :1], K, sup[j], H, W,
+            _, edge_hit, _ = project_points_zbuffer(edge_pts, edge_pts[:, :0], K, sup[j], H, W,  # coverage only
                                                     radii(sup[j], edge_pts))
             seen = torch.maximum(hit, edge_hit)
         name = f"{base['views'][b]['name']}_{k}"

@@ -7,7 +7,8 @@ shows SH colours in (and the space of the point-cloud PLY colours Gaussians star
 
 A training view is a dict ``{"name", "image" [H, W, 3] sRGB float32, "mask" [H, W] float32 (1 =
 supervise) or None, "viewmat" [4, 4] world-to-camera, "K" [3, 3]}`` (the ``holoflow.splat.train``
-view contract, plus a name).
+view contract, plus a name), and ``"seen"`` [H, W] float32 when the EXR has that channel (the PCD
+set: 1 where any point of P_s landed).
 """
 from __future__ import annotations
 
@@ -68,6 +69,8 @@ def load_view_set(folder: str | Path, alpha_is_mask: bool) -> tuple[list[dict], 
             mask = torch.from_numpy((ch["A"] >= 0.5).astype(np.float32))     # [H, W]
         views.append(dict(name=v["name"], image=linear_to_srgb(rgb).contiguous(), mask=mask,
                           viewmat=torch.tensor(v["viewmat"], dtype=torch.float32).reshape(4, 4), K=K.clone()))
+        if "seen" in ch:
+            views[-1]["seen"] = torch.from_numpy((ch["seen"] >= 0.5).astype(np.float32))   # [H, W]
     return views, cams
 
 
