@@ -220,7 +220,7 @@ def markdown(results: dict, args, availability: dict, machine: str) -> str:
     """The report: per-scene table (full method) and the ablation table (means over scenes)."""
     lines = ["# Reconstruction evaluation (`holoflow eval`)", "",
              f"Profile `{args.profile}`, seed {args.seed}, {args.novel} novel cameras and {args.supp or 'all'} "
-             f"supplementary cameras per scene (novel offset "
+             f"supplementary cameras per scene, {args.repeats} training seed(s) per run (tables: means) (novel offset "
              f"<= {args.offset} of the free distance, <= {MAX_OFFSET_M} m), backend `{args.backend}`. "
              f"Machine: {machine}. Images compared in sRGB [0, 1]; `empty` = fraction of pixels with "
              "rendered alpha < 0.5. base = vs PANO set at the base cameras (paper protocol); supp / novel = "
@@ -239,6 +239,14 @@ def markdown(results: dict, args, availability: dict, machine: str) -> str:
         for tag in ("G0", "G1"):
             lines.append(f"| {prompt} | {tag} | {r[tag]['gaussians']} | "
                          + " | ".join(_fmt(r[tag][a].get(b)) for a, b in cols) + f" | {_fmt(r['seconds'])} |")
+    lines += ["", "## G1 - G0 at the novel cameras", "",
+              f"Novel-view PSNR in dB, mean over {args.repeats} training seed(s) (`train_seed` of pre_opt and "
+              "transfer_opt; the scene, its panorama, depth and view sets are the same); min / max over the "
+              "seeds; hidden = the same difference on the pixels the centre never saw.", "",
+              "| scene | variant | seeds | G0 novel psnr | G1 novel psnr | G1 - G0 | min | max | G1 - G0 hidden |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for variant in ("full", "no_inp"):
+        lines += gain_rows(results, variant)
     lines += ["", "## Ablations (G1, mean over scenes)", "",
               "| variant | " + " | ".join(f"{a} {b}" for a, b in cols) + " |", "|" + "---|" * (len(cols) + 1)]
     for variant in VARIANTS:
@@ -248,6 +256,34 @@ def markdown(results: dict, args, availability: dict, machine: str) -> str:
         means = [_mean([r[a].get(b) for r in rs]) for a, b in cols]
         lines.append(f"| {variant} (n={len(rs)}) | " + " | ".join(_fmt(m) for m in means) + " |")
     return "\n".join(lines) + "\n"
+
+
+def mean_tree(trees: list[dict]) -> dict:
+    """Leaf-wise mean of dicts with the same nested keys (numbers; NaN / None ignored, as ``_mean``)."""
+    out = {}
+    for k, v in trees[0].items():
+        if isinstance(v, dict):
+            out[k] = mean_tree([t[k] for t in trees])
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            out[k] = _mean([t[k] for t in trees])
+    return out
+
+
+def gain_rows(results: dict, variant: str) -> list[str]:
+    """Table rows: per scene G1 - G0 novel-view PSNR over the repeats (mean, min, max) and on the
+    hidden pixels (mean), for ``variant``."""
+    rows = []
+    for prompt, per in results.items():
+        r = per.get(variant)
+        if r is None:
+            continue
+        d = [x["G1"]["novel"]["psnr"] - x["G0"]["novel"]["psnr"] for x in r["repeats"]]
+        h = _mean([x["G1"]["novel"].get("hidden_psnr", math.nan) - x["G0"]["novel"].get("hidden_psnr", math.nan)
+                   for x in r["repeats"]])
+        rows.append(f"| {prompt} | {variant} | {len(d)} | {_fmt(r['G0']['novel']['psnr'])} | "
+                    f"{_fmt(r['G1']['novel']['psnr'])} | {sum(d) / len(d):+.2f} | {min(d):+.2f} | {max(d):+.2f} | "
+                    + (f"{h:+.2f}" if not math.isnan(h) else "-") + " |")
+    return rows
 
 
 def _mean(xs):
@@ -261,10 +297,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--profile", default="eval")
     p.add_argument("--set", dest="sets", action="append", default=[], help="stage.param=value, applied to every run")
     p.add_argument("--variants", default="all", help=f"comma list of {', '.join(VARIANTS)} (default all)")
-    p.add_argument("--novel", type=int, default=8, help="random novel cameras per scene")
+    p.add_argument("--novel", type=int, default=24, help="random novel cameras per scene")
     p.add_argument("--offset", type=float, default=0.3, help="novel eye offset, max fraction of the free distance")
     p.add_argument("--supp", type=int, default=16, help="supplementary cameras scored per scene (seeded subset; 0 = all)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the novel and scored supplementary cameras")
+    p.add_argument("--repeats", type=int, default=1,
+                   help="train pre_opt and transfer_opt this many times (train_seed 0..N-1) on the same "
+                        "upstream artifacts; tables show means, the G1 - G0 table the spread")
     p.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
     p.add_argument("--store", type=Path, default=None)
     p.add_argument("--iqa-dir", default=None, help="folder with brisque_model_live.yml / brisque_range_live.yml")
@@ -273,6 +312,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--images", type=Path, default=Path("docs/images"), help="folder for truth/G0/G1 pictures")
     args = p.parse_args(argv)
     variants = list(VARIANTS) if args.variants == "all" else args.variants.split(",")
+    if args.repeats < 1:
+        print("holoflow eval: --repeats must be >= 1", file=sys.stderr)
+        return 2
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         print(f"holoflow eval: unknown variant(s) {unknown}; choose from {list(VARIANTS)}", file=sys.stderr)
@@ -286,19 +328,23 @@ def main(argv: list[str] | None = None) -> int:
     for prompt in args.prompts:
         results[prompt] = {}
         for variant in variants:
-            t0 = time.monotonic()
-            run_dir, _ = run_pipeline(prompt, args.profile, args.sets + VARIANTS[variant], args.store)
-            r = evaluate_run(run_dir, args.novel, args.offset, args.supp, args.seed, args.backend, args.iqa_dir,
-                             cache)
-            renders = r.pop("_renders")
-            r["seconds"] = time.monotonic() - t0
-            results[prompt][variant] = r
-            if variant == "full":
-                args.images.mkdir(parents=True, exist_ok=True)
-                write_png(args.images / f"eval_{_slug(prompt)}.png", strip_image(renders))
-            print(f"eval: {prompt!r} {variant}: G0 novel {_fmt(r['G0']['novel']['psnr'])} dB, "
-                  f"G1 novel {_fmt(r['G1']['novel']['psnr'])} dB, G1 base {_fmt(r['G1']['base']['psnr'])} dB",
-                  file=sys.stderr)
+            runs = []
+            for k in range(args.repeats):
+                t0 = time.monotonic()
+                seeds = [f"pre_opt.train_seed={k}", f"transfer_opt.train_seed={k}"] if k else []
+                run_dir, _ = run_pipeline(prompt, args.profile, args.sets + VARIANTS[variant] + seeds, args.store)
+                r = evaluate_run(run_dir, args.novel, args.offset, args.supp, args.seed, args.backend,
+                                 args.iqa_dir, cache)
+                renders = r.pop("_renders")
+                r["seconds"] = time.monotonic() - t0
+                runs.append(r)
+                if variant == "full" and k == 0:
+                    args.images.mkdir(parents=True, exist_ok=True)
+                    write_png(args.images / f"eval_{_slug(prompt)}.png", strip_image(renders))
+                print(f"eval: {prompt!r} {variant} train_seed {k}: G0 novel {_fmt(r['G0']['novel']['psnr'])} dB, "
+                      f"G1 novel {_fmt(r['G1']['novel']['psnr'])} dB, G1 base {_fmt(r['G1']['base']['psnr'])} dB",
+                      file=sys.stderr)
+            results[prompt][variant] = dict(mean_tree(runs), repeats=runs)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(markdown(results, args, metrics.availability(args.iqa_dir), machine()))
     if args.json:

@@ -21,6 +21,7 @@ import torch
 from holoflow import metrics
 
 Progress = Callable[[int, int], None]
+TRAIN_SEED_STRIDE = 1_000_003   # train_seed k moves every phase's seed by k x this (a prime, far from 1000 i)
 
 
 def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float = 0.1):
@@ -61,6 +62,8 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, b
                progress: Progress | None = None) -> dict:
     """Train ``model`` in place through ``phases`` = [(name, views, iterations)], in order; phases with
     0 iterations are skipped. ``progress(done, total)`` counts iterations over all phases.
+    Phase i draws its views from seed + 1000 i + TRAIN_SEED_STRIDE x ``params['train_seed']`` (default 0):
+    another train_seed gives an independent optimisation of the same inputs (training noise).
     Returns the log: per phase the trainer's log and the Gaussian count after it; wall seconds per
     phase under ``log["seconds"]`` ({phase: s}), kept apart so a caller can move them out of an
     artifact (stages put them in the key record's meta: train_log.json stays byte-deterministic)."""
@@ -81,8 +84,9 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, b
                 progress(_start + int(k), total)
 
         t0 = time.perf_counter()
+        phase_seed = seed + 1000 * i + TRAIN_SEED_STRIDE * int(params.get("train_seed", 0))
         tlog = train(model, views, train_config(iters, params, backend), progress=phase_progress,
-                     seed=seed + 1000 * i)
+                     seed=phase_seed)
         done += iters
         tlog.pop("time_s", None)
         log["seconds"][name] = round(time.perf_counter() - t0, 3)

@@ -29,10 +29,25 @@ def test_report_formats_inf_nan_and_marks_unavailable_metrics():
     nan = {"psnr": math.nan, "ssim": 0.5, "empty": 0.25}
     r = {"G0": {"gaussians": 10, "base": row, "supp": nan, "novel": nan},
          "G1": {"gaussians": 12, "base": row, "supp": row, "novel": row}, "seconds": 3.0}
-    args = argparse.Namespace(profile="eval", seed=0, novel=2, supp=2, offset=0.3, backend="cpu")
+    r = dict(r, repeats=[r])
+    args = argparse.Namespace(profile="eval", seed=0, novel=2, supp=2, offset=0.3, backend="cpu", repeats=1)
     md = heval.markdown({"a room": {"full": r, "no_inp": r}}, args, {"lpips": "unavailable: x"}, "2-core CPU")
     assert "| a room | G1 | 12 | inf |" in md
     assert "lpips: unavailable" in md and "no_inp (n=1)" in md
+
+
+def test_repeats_are_averaged_leaf_by_leaf_and_the_gain_table_shows_their_spread():
+    def run(g0, g1, hidden0, hidden1):
+        return {"G0": {"gaussians": 10, "novel": {"psnr": g0, "hidden_psnr": hidden0, "empty": 0.0}},
+                "G1": {"gaussians": 14, "novel": {"psnr": g1, "hidden_psnr": hidden1, "empty": math.nan}},
+                "seconds": 2.0}
+
+    runs = [run(20.0, 21.0, 15.0, 15.5), run(22.0, 21.5, 16.0, 17.5)]
+    mean = heval.mean_tree(runs)
+    assert mean["G0"]["novel"]["psnr"] == 21.0 and mean["G1"]["gaussians"] == 14
+    assert math.isnan(mean["G1"]["novel"]["empty"]) and mean["seconds"] == 2.0
+    rows = heval.gain_rows({"a beach": {"full": dict(mean, repeats=runs)}}, "full")
+    assert rows == ["| a beach | full | 2 | 21.00 | 21.25 | +0.25 | -0.50 | +1.00 | +1.00 |"]
 
 
 def test_nothing_is_hidden_from_the_centre_and_novel_cameras_see_disocclusions():

@@ -206,3 +206,30 @@ def test_densification_stops_at_densify_stop(iters, stop, steps):
     assert got == steps
     with pytest.raises(ValueError, match="densify_stop"):
         train_config(iters, {"densify_stop": 1.5}, "cpu")
+
+
+def test_train_seed_gives_an_independent_optimisation_and_zero_keeps_the_old_draws():
+    """train_seed 0 reproduces the phase seeds (seed + 1000 i); another value changes every phase's
+    view order, so `holoflow eval --repeats` measures training noise on unchanged inputs."""
+    from holoflow.geometry.camera import intrinsics_from_fov, look_at
+    from holoflow.recon.schedule import TRAIN_SEED_STRIDE, init_model, run_phases
+
+    g = torch.Generator().manual_seed(0)
+    xyz = (torch.rand(200, 3, generator=g) * 2 - 1).numpy() + np.array([0, 0, 4], np.float32)
+    rgb = (torch.rand(200, 3, generator=g) * 255).to(torch.uint8).numpy()
+    eyes = torch.tensor([[0.0, 0, 0], [0.3, 0, 0], [0, 0.3, 0], [-0.3, 0, 0]], dtype=torch.float64)
+    vms = look_at(eyes, eyes + torch.tensor([0.0, 0, 1], dtype=torch.float64)).float()
+    K = intrinsics_from_fov(60.0, 12, 12).float()
+    views = [dict(image=torch.rand(12, 12, 3, generator=g), mask=None, viewmat=vm, K=K) for vm in vms]
+
+    def fit(train_seed):
+        model = init_model(xyz, rgb, 0.5)
+        params = {"densify_every": 100, "densify_from": 500, "train_seed": train_seed}
+        log = run_phases(model, [("a", views, 3), ("b", views, 3)], params, "reference", seed=7)
+        return model.means.detach().clone(), [ph["train"]["seed"] for ph in log["phases"]]
+
+    m0, s0 = fit(0)
+    m0b, _ = fit(0)
+    m1, s1 = fit(1)
+    assert s0 == [7, 1007] and s1 == [7 + TRAIN_SEED_STRIDE, 1007 + TRAIN_SEED_STRIDE]
+    assert torch.equal(m0, m0b) and not torch.equal(m0, m1)
