@@ -237,7 +237,7 @@ def markdown(results: dict, args, availability: dict, machine: str) -> str:
         if r is None:
             continue
         for tag in ("G0", "G1"):
-            lines.append(f"| {prompt} | {tag} | {r[tag]['gaussians']} | "
+            lines.append(f"| {prompt} | {tag} | {round(r[tag]['gaussians'])} | "
                          + " | ".join(_fmt(r[tag][a].get(b)) for a, b in cols) + f" | {_fmt(r['seconds'])} |")
     lines += ["", "## G1 - G0 at the novel cameras", "",
               f"Novel-view PSNR in dB, mean over {args.repeats} training seed(s) (`train_seed` of pre_opt and "
@@ -245,7 +245,7 @@ def markdown(results: dict, args, availability: dict, machine: str) -> str:
               "seeds; hidden = the same difference on the pixels the centre never saw.", "",
               "| scene | variant | seeds | G0 novel psnr | G1 novel psnr | G1 - G0 | min | max | G1 - G0 hidden |",
               "|---|---|---|---|---|---|---|---|---|"]
-    for variant in ("full", "no_inp"):
+    for variant in VARIANTS:
         lines += gain_rows(results, variant)
     lines += ["", "## Ablations (G1, mean over scenes)", "",
               "| variant | " + " | ".join(f"{a} {b}" for a, b in cols) + " |", "|" + "---|" * (len(cols) + 1)]
