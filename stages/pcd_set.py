@@ -29,9 +29,6 @@ import math
 import os
 
 
-FAR_QUANTILE, SHELL_REL = 0.99, 0.999  # points at >= 0.999 x the radii's 99th percentile are "sky"
-
-
 def main() -> int:
     from holoflow.stage import Job
 
@@ -42,7 +39,8 @@ def main() -> int:
     torch.set_num_threads(max(1, (os.cpu_count() or 2) // 2))  # spinning workers cost more than they bring on shared cores
 
     from holoflow.geometry.export import cameras_json, cameras_tensors, read_cameras, write_cameras, write_transforms
-    from holoflow.geometry.pointcloud import depth_gradient, footprint_radius, project_points_zbuffer
+    from holoflow.geometry.pointcloud import (depth_gradient, footprint_radius, project_points_zbuffer,
+                                              solid_points_mask)
     from holoflow.geometry.rigs import SUPPLEMENTARY, supplementary_rig
     from holoflow.io.exr import write_rgb
     from holoflow.io.ply import read_points
@@ -78,9 +76,7 @@ def main() -> int:
         return radius if radius > 0 else footprint_radius(points, viewmat, K, spacing)
 
     r = torch.linalg.vector_norm(pts, dim=-1)  # [N] m
-    solid = r < SHELL_REL * torch.quantile(r, FAR_QUANTILE)  # not the far sky shell, nor beyond it
-    if not solid.any():
-        solid = torch.ones_like(solid)
+    solid = solid_points_mask(pts)  # not the far sky shell, nor beyond it
     geo, geo_rgb = pts[solid], linear[solid]  # [G, 3] each
     medians = []
     for i in range(M):  # typical depth of the geometry (not the sky) seen by each base camera

@@ -119,6 +119,22 @@ def far_shell_radius(radial_depth: torch.Tensor, factor: float = 2.0, quantile: 
     return float(factor * torch.quantile(finite.double()[:: max(1, finite.numel() // 1_000_000)], quantile))
 
 
+FAR_QUANTILE, SHELL_REL = 0.99, 0.999
+
+
+def solid_points_mask(xyz: torch.Tensor) -> torch.Tensor:
+    """[N] bool: the points of a panorama cloud xyz [N, 3] (metres, centre at the origin) that are not
+    on the far sky shell: radius < 0.999 x the 99th percentile of the radii. That percentile is the
+    shell whenever the sky covers more than 1% of the cloud (it then also drops sky points the depth
+    stage left finite and farther still); with no sky it drops the farthest 1% of the geometry, which
+    barely moves a median. All True when nothing would be left."""
+    r = torch.linalg.vector_norm(xyz, dim=-1)  # [N]
+    if r.numel() == 0:
+        return torch.ones_like(r, dtype=torch.bool)
+    solid = r < SHELL_REL * torch.quantile(r.double()[:: max(1, r.numel() // 1_000_000)], FAR_QUANTILE).to(r.dtype)
+    return solid if solid.any() else torch.ones_like(solid)
+
+
 def sky_to_shell(radial_depth: torch.Tensor, radius: float) -> torch.Tensor:
     """Depth [H, W] with every unbounded pixel (non-finite or <= 0) put on a sphere of ``radius`` metres,
     so the scene stays enclosed."""

@@ -37,12 +37,28 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float = 0.1):
                                      sh_degree=0, opacity=opacity)
 
 
-def train_config(iterations: int, params: dict, backend: str):
+def panorama_extent(xyz: np.ndarray) -> float:
+    """Scene extent (metres) for the trainer's learning-rate scale and size thresholds: the median
+    distance from the panorama centre of the points of P_f [N, 3] off the far sky shell
+    (``solid_points_mask``). The trainer's own default, the median over all points, is the shell's
+    radius as soon as the sky holds half the cloud (outdoor scenes: 100x the distance of the ground),
+    which would scale every position step and the clone/split size by that much."""
+    from holoflow.geometry.pointcloud import solid_points_mask
+
+    pts = torch.from_numpy(np.asarray(xyz, np.float64))
+    if len(pts) == 0:
+        raise ValueError("the point cloud is empty: no scene extent")
+    r = torch.linalg.vector_norm(pts[solid_points_mask(pts)], dim=-1)
+    return max(float(r.median()), 1e-6)
+
+
+def train_config(iterations: int, params: dict, backend: str, extent: float | None = None):
     """A ``holoflow.splat.TrainConfig`` for one phase from a stage's params: ``densify_every``,
     ``densify_from`` and ``densify_stop`` (densification runs at steps densify_from < it <=
     min(densify_stop x iterations, iterations - densify_every)),
     ``opacity_reset_every`` (0 = never, the paper) and ``max_gaussians``; ``backend`` is the
-    rasterizer (the stage's engine)."""
+    rasterizer (the stage's engine); ``extent`` the scene extent in metres (None: the trainer's
+    default)."""
     from holoflow.splat import TrainConfig
 
     every, iters = int(params.get("densify_every", 100)), int(iterations)
@@ -55,15 +71,17 @@ def train_config(iterations: int, params: dict, backend: str):
                        densify_from=int(params.get("densify_from", 500)),
                        densify_until=max(1, min(int(stop * iters), iters - every) + 1),
                        opacity_reset_every=int(params.get("opacity_reset_every", 0)),
-                       max_gaussians=int(params.get("max_gaussians", 2_000_000)), backend=backend)
+                       max_gaussians=int(params.get("max_gaussians", 2_000_000)), backend=backend,
+                       scene_extent=extent)
 
 
 def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, backend: str, seed: int,
-               progress: Progress | None = None) -> dict:
+               progress: Progress | None = None, extent: float | None = None) -> dict:
     """Train ``model`` in place through ``phases`` = [(name, views, iterations)], in order; phases with
     0 iterations are skipped. ``progress(done, total)`` counts iterations over all phases.
     Phase i draws its views from seed + 1000 i + TRAIN_SEED_STRIDE x ``params['train_seed']`` (default 0):
     another train_seed gives an independent optimisation of the same inputs (training noise).
+    ``extent``: the scene extent (m) of every phase (``panorama_extent``; None: the trainer's default).
     Returns the log: per phase the trainer's log and the Gaussian count after it; wall seconds per
     phase under ``log["seconds"]`` ({phase: s}), kept apart so a caller can move them out of an
     artifact (stages put them in the key record's meta: train_log.json stays byte-deterministic)."""
@@ -85,7 +103,7 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, b
 
         t0 = time.perf_counter()
         phase_seed = seed + 1000 * i + TRAIN_SEED_STRIDE * int(params.get("train_seed", 0))
-        tlog = train(model, views, train_config(iters, params, backend), progress=phase_progress,
+        tlog = train(model, views, train_config(iters, params, backend, extent), progress=phase_progress,
                      seed=phase_seed)
         done += iters
         tlog.pop("time_s", None)
@@ -102,7 +120,8 @@ def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pan
     Returns (model, log)."""
     model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)))
     log = run_phases(model, [("pcd", pcd_views, int(params["pcd_iters"])),
-                             ("pano", pano_views, int(params["pano_iters"]))], params, backend, seed, progress)
+                             ("pano", pano_views, int(params["pano_iters"]))], params, backend, seed, progress,
+                     panorama_extent(xyz))
     return model, log
 
 
@@ -114,7 +133,7 @@ def transfer_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pano_views: list[dict
     model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)))
     views = pano_views + (inp_views if params.get("use_inp", True) else [])
     log = run_phases(model, [("pano+inp" if params.get("use_inp", True) else "pano", views,
-                              int(params["iters"]))], params, backend, seed, progress)
+                              int(params["iters"]))], params, backend, seed, progress, panorama_extent(xyz))
     return model, log
 
 

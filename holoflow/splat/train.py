@@ -43,7 +43,9 @@ class TrainConfig:
     """Clone Gaussians whose largest scale is <= percent_dense * extent, split the larger ones."""
     prune_opacity: float = 0.005
     prune_screen_size: float = 20.0
-    """Once it > size_prune_from, also prune radii above this (px) and scales above 0.1 * extent."""
+    """Once it > size_prune_from, also prune radii above this (px) and scales above 0.1 x
+    max(extent, the Gaussian's distance from the camera centroid): 3DGS's 0.1 x extent for everything
+    within the extent, an angular limit beyond it, so a far sky shell is not pruned for being far."""
     size_prune_from: int = 3000
     opacity_reset_every: int = 0
     """Reset opacities to <= 0.01 every this many steps while densifying; 0 = off (paper: off)."""
@@ -63,9 +65,14 @@ class TrainConfig:
     meaningful for panorama rigs, whose cameras all sit near one point."""
 
 
+def camera_centres(viewmats: torch.Tensor) -> torch.Tensor:
+    """Camera centres [V, 3] (world) of world-to-camera viewmats [V, 4, 4]."""
+    return -torch.einsum("vji,vj->vi", viewmats[:, :3, :3], viewmats[:, :3, 3])
+
+
 def scene_extent(model: GaussianModel, viewmats: torch.Tensor) -> float:
     """Default extent (see ``TrainConfig.scene_extent``). viewmats [V, 4, 4] world-to-camera."""
-    centres = -torch.einsum("vji,vj->vi", viewmats[:, :3, :3], viewmats[:, :3, 3])     # [V, 3]
+    centres = camera_centres(viewmats)                                                # [V, 3]
     mid = centres.mean(0)
     cam = 1.1 * float((centres - mid).norm(dim=-1).max()) if len(centres) else 0.0
     pts = float((model.means.detach() - mid).norm(dim=-1).median()) if len(model) else 0.0
@@ -112,6 +119,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
     dev = model.means.device
     viewmats = torch.stack([torch.as_tensor(v["viewmat"], dtype=torch.float32) for v in views]).to(dev)
     extent = cfg.scene_extent or scene_extent(model, viewmats)
+    centroid = camera_centres(viewmats).mean(0)                                       # [3]
     opt = _make_optimizer(model, cfg, extent)
     lr_steps = cfg.lr_means_steps or cfg.iterations
     n = len(model)
@@ -154,7 +162,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
             opt.step()
             opt.zero_grad(set_to_none=True)
             if cfg.densify_from < it < cfg.densify_until and it % cfg.densify_every == 0:
-                event = _densify_and_prune(model, opt, stats, cfg, extent, it, gen)
+                event = _densify_and_prune(model, opt, stats, cfg, extent, centroid, it, gen)
                 log["densify"].append(event)
                 if event.get("note"):
                     log["notes"].append(event["note"])
@@ -200,8 +208,8 @@ def _replace_params(model: GaussianModel, opt: torch.optim.Adam, keep: torch.Ten
         setattr(model, name, new)
 
 
-def _densify_and_prune(model, opt, stats, cfg: TrainConfig, extent: float, it: int,
-                       gen: torch.Generator) -> dict:
+def _densify_and_prune(model, opt, stats, cfg: TrainConfig, extent: float, centroid: torch.Tensor,
+                       it: int, gen: torch.Generator) -> dict:
     """Clone small / split large Gaussians with a high mean view-space gradient, then prune."""
     grads = torch.nan_to_num(stats["grad"] / stats["count"])                     # [N]
     scales = torch.exp(model.log_scales.detach())                                # [N, 3]
@@ -240,7 +248,8 @@ def _densify_and_prune(model, opt, stats, cfg: TrainConfig, extent: float, it: i
     if it > cfg.size_prune_from:
         radii = torch.cat([stats["radii"][~split], stats["radii"].new_zeros(n_after - int((~split).sum()))])
         prune |= radii > cfg.prune_screen_size
-        prune |= torch.exp(model.log_scales.detach()).max(-1).values > 0.1 * extent
+        reach = torch.linalg.vector_norm(model.means.detach() - centroid, dim=-1).clamp(min=extent)  # [N]
+        prune |= torch.exp(model.log_scales.detach()).max(-1).values > 0.1 * reach
     _replace_params(model, opt, ~prune, {k: p[k][:0] for k in p})
     return dict(step=it, cloned=int(clone.sum()), split=int(split.sum()), pruned=int(prune.sum()),
                 count=len(model), note=note)

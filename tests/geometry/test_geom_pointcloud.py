@@ -161,3 +161,23 @@ def test_footprint_radius_closes_sampling_gaps(dtype, device):
     r = int(radii[seen].max())  # largest splat that lands in the view
     far_hid = F.max_pool2d(visible, 2 * r - 1, 1, r - 1)[0, 0] < 0.5
     assert (full[far_hid] == 0).all() and bool(far_hid.any())
+
+
+def test_solid_points_mask_drops_exactly_the_sky_shell(dtype, device):
+    """Outdoor-like cloud: the box room's lower 45 % of rows plus a sky on the far shell (the upper 55 %,
+    so the median radius is the shell's): the mask keeps every room point and no shell point. Indoors (no sky) it drops at most the farthest ~1 % and leaves the median in place."""
+    from holoflow.geometry.pointcloud import far_shell_radius, sky_to_shell, solid_points_mask
+
+    rgb, t = rgbd_pano(64, 128, dtype, device)
+    sky = torch.zeros_like(t, dtype=torch.bool)
+    sky[: int(0.55 * 64)] = True
+    depth = sky_to_shell(torch.where(sky, torch.full_like(t, float("inf")), t), far_shell_radius(t))
+    xyz, _ = equirect_to_points(rgb, depth)
+    solid = solid_points_mask(xyz)
+    assert torch.equal(solid, ~sky.reshape(-1))
+    room, _ = equirect_to_points(rgb, t)
+    kept = solid_points_mask(room)
+    r = torch.linalg.vector_norm(room, dim=-1)
+    assert float(kept.double().mean()) >= 0.985
+    assert float(r[kept].median()) == pytest.approx(float(r.median()), rel=0.01)
+    assert bool(solid_points_mask(xyz[:1]).all())

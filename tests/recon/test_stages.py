@@ -12,7 +12,8 @@ import torch
 import synth
 from holoflow import metrics
 from holoflow.io.exr import read_exr
-from holoflow.recon.schedule import render_views
+from holoflow.io.ply import read_points
+from holoflow.recon.schedule import panorama_extent, render_views
 
 ROOT = Path(__file__).resolve().parents[2]
 SIZE = 24
@@ -61,6 +62,21 @@ def test_pre_opt_writes_g0_in_3dgs_layout(chain):
     assert [p["name"] for p in log["phases"]] == ["pcd", "pano"]
     meta = _meta(chain["logs"]["pre"])
     assert meta["gaussians"] > 0 and meta["psnr_pano"] > 15
+    xyz, _ = read_points(chain["inputs"]["cloud"] / "pf.ply")
+    for phase in log["phases"]:     # every phase trains at P_f's sky-free extent
+        assert phase["train"]["extent"] == pytest.approx(panorama_extent(xyz), rel=1e-12)
+
+
+def test_panorama_extent_ignores_the_sky_shell():
+    """Half the cloud on a 300 m sky shell, half on surfaces 2-4 m away: the extent is the surfaces'
+    median distance, where the median over all points (the trainer's default) is the shell."""
+    g = np.random.default_rng(0)
+    d = g.normal(size=(2000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = np.concatenate([g.uniform(2.0, 4.0, 900), np.full(1100, 300.0)])
+    xyz = (d * r[:, None]).astype(np.float32)
+    assert panorama_extent(xyz) == pytest.approx(float(np.median(r[:900])), rel=1e-3)
+    assert float(np.median(np.linalg.norm(xyz, axis=1))) == pytest.approx(300.0, rel=1e-4)
 
 
 def test_inp_set_fills_every_missing_pixel_and_skips_complete_views(chain):

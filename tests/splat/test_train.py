@@ -142,3 +142,21 @@ def test_opacity_reset():
     train(m, views, TrainConfig(iterations=10, opacity_reset_every=10, densify_until=20,
                                 densify_from=100), seed=0)
     assert torch.sigmoid(m.opacity_logits).max() <= 0.01 + 1e-6
+
+
+def test_size_prune_is_3dgs_within_the_extent_and_angular_beyond():
+    """After size_prune_from, a Gaussian is pruned when its largest scale exceeds 0.1 x max(extent, its
+    distance from the camera centroid): inside the extent that is 3DGS's rule; a far sky-shell Gaussian
+    as wide as its pixel footprint survives, one wider than 0.1 of its distance does not."""
+    means = torch.tensor([[0.0, 0.0, 2.0], [0.0, 0.3, 2.0], [5.0, 0.0, 300.0], [-5.0, 0.0, 300.0]])
+    scales = torch.tensor([0.05, 0.5, 10.0, 50.0])          # kept, pruned (> 0.2), kept (< 30), pruned
+    m = GaussianModel.from_points(means, torch.full((4, 3), 0.5), opacity=0.5)
+    with torch.no_grad():
+        m.log_scales.copy_(torch.log(scales)[:, None].expand(4, 3))
+    view = dict(image=torch.zeros(8, 8, 3), mask=None, viewmat=look_at((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+                K=intrinsics(8, 8, 60.0))
+    cfg = TrainConfig(iterations=2, densify_from=0, densify_every=1, densify_until=3, size_prune_from=0,
+                      densify_grad_threshold=1e9, prune_screen_size=1e9, scene_extent=2.0)
+    log = train(m, [view], cfg, seed=0)
+    assert [e["pruned"] for e in log["densify"]] == [2, 0]
+    assert torch.allclose(m.means[:, 0].detach(), torch.tensor([0.0, 5.0]), atol=1e-3)
