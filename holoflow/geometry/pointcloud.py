@@ -131,7 +131,8 @@ def solid_points_mask(xyz: torch.Tensor) -> torch.Tensor:
     r = torch.linalg.vector_norm(xyz, dim=-1)  # [N]
     if r.numel() == 0:
         return torch.ones_like(r, dtype=torch.bool)
-    solid = r < SHELL_REL * torch.quantile(r.double()[:: max(1, r.numel() // 1_000_000)], FAR_QUANTILE).to(r.dtype)
+    far = torch.quantile(r.double()[:: max(1, r.numel() // 1_000_000)], FAR_QUANTILE)  # subsampled past 1M
+    solid = r < SHELL_REL * far.to(r.dtype)
     return solid if solid.any() else torch.ones_like(solid)
 
 

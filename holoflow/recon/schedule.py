@@ -41,8 +41,8 @@ def panorama_extent(xyz: np.ndarray) -> float:
     """Scene extent (metres) for the trainer's learning-rate scale and size thresholds: the median
     distance from the panorama centre of the points of P_f [N, 3] off the far sky shell
     (``solid_points_mask``). The trainer's own default, the median over all points, is the shell's
-    radius as soon as the sky holds half the cloud (outdoor scenes: 100x the distance of the ground),
-    which would scale every position step and the clone/split size by that much."""
+    radius as soon as the sky holds half the cloud (on the eval beach 365 m against surfaces ~2 m
+    away), which would scale every position step and the clone/split size by that much."""
     from holoflow.geometry.pointcloud import solid_points_mask
 
     pts = torch.from_numpy(np.asarray(xyz, np.float64))

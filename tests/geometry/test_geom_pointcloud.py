@@ -165,7 +165,8 @@ def test_footprint_radius_closes_sampling_gaps(dtype, device):
 
 def test_solid_points_mask_drops_exactly_the_sky_shell(dtype, device):
     """Outdoor-like cloud: the box room's lower 45 % of rows plus a sky on the far shell (the upper 55 %,
-    so the median radius is the shell's): the mask keeps every room point and no shell point. Indoors (no sky) it drops at most the farthest ~1 % and leaves the median in place."""
+    so the median radius is the shell's): the mask keeps every room point and no shell point. Indoors
+    (no sky) it drops at most the farthest ~1 % and leaves the median in place."""
     from holoflow.geometry.pointcloud import far_shell_radius, sky_to_shell, solid_points_mask
 
     rgb, t = rgbd_pano(64, 128, dtype, device)
