@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-DISPATCH = {"eval": "holoflow.eval", "report": "holoflow.report"}
+DISPATCH = {"eval": "holoflow.eval", "report": "holoflow.report", "models": "holoflow.models"}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -69,7 +69,8 @@ def _parser() -> argparse.ArgumentParser:
         sp.add_argument("--store", help="store folder (default $HOLOFLOW_STORE, else artifacts/ beside "
                         "the pipeline file)")
         if resolve_opts:
-            sp.add_argument("--profile", help="profile from pipeline.yaml (default: its default_profile)")
+            sp.add_argument("--profile", help="profile from pipeline.yaml (default: its default_profile); a "
+                            "comma list applies in order: paper,tiny = the paper's engines at tiny sizes")
             sp.add_argument("--set", dest="sets", action="append", default=[], metavar="STAGE.PARAM=VALUE",
                             help="override a param (YAML value, type-checked); STAGE.engine=NAME picks an engine")
             sp.add_argument("--use", dest="uses", action="append", default=[], metavar="STAGE=PATH",
@@ -91,6 +92,8 @@ def _parser() -> argparse.ArgumentParser:
         r.add_argument("--device", choices=["cpu", "cuda", "auto"],
                        help="device named in each job spec (default $HOLOFLOW_DEVICE, else cpu; auto = cuda when "
                        "an NVIDIA driver is present); not part of the cache key")
+        r.add_argument("--models", metavar="DIR", help="every real-model engine loads from DIR's manifest.json "
+                       "(`holoflow models random DIR` writes one; a folder of your own weights works too)")
         r.add_argument("--lock-timeout", type=float, metavar="S",
                        help="give up if the store stays locked S seconds")
         r.add_argument("-v", "--verbose", action="store_true", help="echo the steps' output")
@@ -148,6 +151,7 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("bench", help="holoflow bench NAME [ARGS]: run holoflow.bench.NAME (e.g. cache)")
     sub.add_parser("eval", help="holoflow eval ...: accuracy against procedural ground truth")
     sub.add_parser("report", help="holoflow report ...: a run's report")
+    sub.add_parser("models", help="holoflow models list|random ...: the real engines' weights")
     return p
 
 
@@ -181,7 +185,7 @@ def _options(args):
                    device=getattr(args, "device", None), lock_timeout=getattr(args, "lock_timeout", None),
                    verbose=getattr(args, "verbose", False), jobs=getattr(args, "jobs", 1),
                    executor=getattr(args, "executor", "local"), address=getattr(args, "address", None),
-                   retries=getattr(args, "retries", None))
+                   retries=getattr(args, "retries", None), models=getattr(args, "models", None))
 
 
 # -- commands --------------------------------------------------------------------------------------

@@ -20,7 +20,12 @@ Schema (docs/cli.md has the user-facing version)::
         params: {strength: 0.5}   # optional; defaults, their types are checked on override
         resources: {cpus: 1, gpus: 0, memory_gb: 2}   # optional; what one step needs (scheduling)
     profiles:
-      NAME: {STAGE: {engine: X, PARAM: VALUE, resources: {gpus: 1}}}
+      NAME: {device: auto, STAGE: {engine: X, PARAM: VALUE, resources: {gpus: 1}}}
+
+A profile's optional ``device`` (cpu | cuda | auto) is the device its steps ask for; ``--device`` and
+$HOLOFLOW_DEVICE win over it. ``--profile a,b`` applies a, then b, in order: for each stage, b's
+engine / params / resources replace a's key by key (a key b does not name keeps a's value), and the
+last profile naming a device wins.
 """
 from __future__ import annotations
 
@@ -33,6 +38,7 @@ _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _TOP_KEYS = {"version", "seed", "default_profile", "stages", "profiles"}
 _STAGE_KEYS = {"run", "engine", "engines", "prompt", "inputs", "code", "primary", "params", "resources"}
 _RESOURCE_KEYS = {"cpus": int, "gpus": int, "memory_gb": float}
+DEVICES = ("cpu", "cuda", "auto")
 SUPPORTED_VERSIONS = (1,)
 
 
@@ -83,6 +89,7 @@ class Pipeline:
     default_profile: str | None
     stages: dict[str, Stage]       # in topological order
     profiles: dict[str, dict[str, dict[str, Any]]]
+    profile_devices: dict[str, str] = field(default_factory=dict)    # profile -> cpu | cuda | auto
 
     @property
     def root(self) -> Path:
@@ -212,12 +219,12 @@ def _validate(path: Path, doc: Any) -> Pipeline:
                 raise _err(path, s.name, f"input '{inp}' names the stage itself",
                            "a stage cannot read its own outputs; name an upstream stage")
     ordered = _toposort(path, stages)
-    profiles = _profiles(path, doc.get("profiles"), stages)
+    profiles, devices = _profiles(path, doc.get("profiles"), stages)
     default_profile = doc.get("default_profile")
     if default_profile is not None and default_profile not in profiles:
         raise _err(path, None, f"default_profile '{default_profile}' is not a profile",
                    f"define it under `profiles:` or use one of: {', '.join(profiles) or '(none)'}")
-    return Pipeline(path, version, int(seed), default_profile, ordered, profiles)
+    return Pipeline(path, version, int(seed), default_profile, ordered, profiles, devices)
 
 
 def _stage(path: Path, name: Any, block: Any) -> Stage:
@@ -340,17 +347,29 @@ def _find_cycle(pending: dict[str, Stage]) -> list[str]:
     return seen[seen.index(node):] + [node]
 
 
-def _profiles(path: Path, raw: Any, stages: dict[str, Stage]) -> dict[str, dict[str, dict[str, Any]]]:
+def _profiles(path: Path, raw: Any, stages: dict[str, Stage]
+              ) -> tuple[dict[str, dict[str, dict[str, Any]]], dict[str, str]]:
+    """({profile: {stage: overrides}}, {profile: device}) of the ``profiles:`` block."""
     if raw is None:
-        return {}
+        return {}, {}
     if not isinstance(raw, dict):
         raise _err(path, None, "`profiles:` is not a mapping", "write `profiles: {NAME: {STAGE: {param: value}}}`")
-    out = {}
+    out, devices = {}, {}
     for pname, block in raw.items():
         block = block or {}
         if not isinstance(block, dict):
             raise _err(path, None, f"profile '{pname}' is not a mapping of stage -> overrides",
                        f"write `{pname}: {{STAGE: {{param: value}}}}`")
+        block = dict(block)
+        if "," in str(pname):
+            raise _err(path, None, f"profile name '{pname}' holds a comma", "`--profile a,b` lists profiles; "
+                       "rename it")
+        if "device" in block:
+            device = block.pop("device")
+            if device not in DEVICES:
+                raise _err(path, None, f"profile '{pname}' asks for device {device!r}",
+                           f"use one of: {', '.join(DEVICES)}")
+            devices[str(pname)] = device
         prof = {}
         for sname, over in block.items():
             if sname not in stages:
@@ -364,7 +383,7 @@ def _profiles(path: Path, raw: Any, stages: dict[str, Stage]) -> dict[str, dict[
                 _check_override(path, stages[sname], key, value, f"profile '{pname}'")
             prof[sname] = dict(over)
         out[str(pname)] = prof
-    return out
+    return out, devices
 
 
 def _check_override(path: Path, stage: Stage, key: str, value: Any, origin: str) -> Any:
@@ -421,17 +440,14 @@ def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[
     ``sets`` are ``stage.param=value`` strings, the value parsed as YAML (``0.7``, ``[4, 4]``, ``true``);
     ``stage.engine=NAME`` picks an engine.
     """
-    name = profile if profile is not None else pipe.default_profile
-    if name is not None and name not in pipe.profiles:
-        raise PipelineError(f"{pipe.path.name}: unknown profile '{name}'; fix: use one of: "
-                            f"{', '.join(pipe.profiles) or '(none defined)'}{_suggest(name, pipe.profiles)}")
     out = {}
     for s in pipe.stages.values():
         out[s.name] = Resolved(s, s.engine, dict(s.params), resources=s.resources)
-    for sname, over in (pipe.profiles.get(name, {}) if name else {}).items():
-        for key, value in over.items():
-            _apply(out[sname], key, _check_override(pipe.path, out[sname].stage, key, value,
-                                                     f"profile '{name}'"), f"profile {name}")
+    for name in profile_list(pipe, profile):
+        for sname, over in pipe.profiles[name].items():
+            for key, value in over.items():
+                _apply(out[sname], key, _check_override(pipe.path, out[sname].stage, key, value,
+                                                         f"profile '{name}'"), f"profile {name}")
     for item in sets:
         if "=" not in item or "." not in item.split("=", 1)[0]:
             raise PipelineError(f"--set {item!r}: expected STAGE.PARAM=VALUE; fix: e.g. "
@@ -452,6 +468,24 @@ def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[
             value = text
         _apply(out[sname], key, _check_override(pipe.path, out[sname].stage, key, value, "--set"), "--set")
     return out
+
+
+def profile_list(pipe: Pipeline, profile: str | None) -> list[str]:
+    """The profiles ``profile`` names, in the order they apply: ``"paper,tiny"`` -> [paper, tiny];
+    None -> [default_profile] (or none). Raises PipelineError naming an unknown one."""
+    text = profile if profile is not None else (pipe.default_profile or "")
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    for name in names:
+        if name not in pipe.profiles:
+            raise PipelineError(f"{pipe.path.name}: unknown profile '{name}'; fix: use one of: "
+                                f"{', '.join(pipe.profiles) or '(none defined)'}{_suggest(name, pipe.profiles)}")
+    return names
+
+
+def profile_device(pipe: Pipeline, profile: str | None) -> str | None:
+    """The device the last profile of ``profile`` that names one asks for (None: none does)."""
+    asked = [pipe.profile_devices[n] for n in profile_list(pipe, profile) if n in pipe.profile_devices]
+    return asked[-1] if asked else None
 
 
 def _apply(r: Resolved, key: str, value: Any, origin: str) -> None:

@@ -20,7 +20,7 @@ from typing import Any
 
 from .cachekey import CodeHasher, cache_key, components, reasons, tree_digest
 from .executors import StepTask
-from .pipeline import Pipeline, PipelineError, Resolved, check_files, resolve
+from .pipeline import Pipeline, PipelineError, Resolved, check_files, profile_device, resolve
 from .store import Store
 
 
@@ -51,6 +51,7 @@ class Options:
     executor: str = "local"         # local | ray
     address: str | None = None      # Ray cluster address (ray executor)
     retries: int | None = None      # extra attempts per failed step (None: the executor's default)
+    models: str | None = None       # --models DIR: every real engine loads from DIR's manifest.json
 
 
 @dataclass
@@ -71,18 +72,18 @@ class Context:
     @classmethod
     def build(cls, pipe: Pipeline, store: Store, opts: Options, hasher: CodeHasher | None = None) -> "Context":
         resolved = resolve(pipe, opts.profile, opts.sets)
+        device = run_device(pipe, opts)
+        resolve_device_engines(resolved, device)
+        if opts.models:
+            from .models import apply_manifest
+
+            apply_manifest(resolved, Path(opts.models))
         uses = parse_uses(pipe, opts.uses)
         prompt = opts.prompt
         if prompt is None:
             info = store.run_info(store.latest_run_id())
             prompt = info.get("prompt") if info else None
         seed = pipe.seed if opts.seed is None else opts.seed
-        device = opts.device or os.environ.get("HOLOFLOW_DEVICE", "cpu")
-        if device == "auto":
-            device = "cuda" if cuda_present() else "cpu"
-        if device not in ("cpu", "cuda"):
-            raise PipelineError(f"device {device!r} (from --device or HOLOFLOW_DEVICE); fix: use cpu, cuda "
-                                f"or auto")
         hasher = hasher or CodeHasher(pipe.root, store.root / "cache" / "code.json")
         return cls(pipe, store, resolved, seed, prompt, opts.profile or pipe.default_profile, uses,
                    hasher, device, opts.verbose)
@@ -101,6 +102,31 @@ class Context:
                                     f"holoflow run \"a small wooden cabin\"")
             prompt = self.prompt
         return components(name, code, r.engine, r.params, inputs, self.seed, prompt)
+
+
+def run_device(pipe: Pipeline, opts: Options) -> str:
+    """cpu or cuda: ``--device``, else $HOLOFLOW_DEVICE, else what the profile asks for, else cpu
+    (auto = cuda when a driver is present). A profile that asks for cuda on a machine without one is
+    a PipelineError naming the fix; an explicit cuda is left to the steps (a remote executor may have it)."""
+    explicit = opts.device or os.environ.get("HOLOFLOW_DEVICE")
+    asked = explicit or profile_device(pipe, opts.profile) or "cpu"
+    if asked not in ("cpu", "cuda", "auto"):
+        raise PipelineError(f"device {asked!r} (from --device or HOLOFLOW_DEVICE); fix: use cpu, cuda or auto")
+    if asked == "auto":
+        return "cuda" if cuda_present() else "cpu"
+    if asked == "cuda" and not explicit and not cuda_present():
+        raise PipelineError(f"profile '{opts.profile}' asks for device cuda and this machine has no CUDA "
+                            f"device; fix: run it on a GPU machine, or add --device cpu (slow at full size)")
+    return asked
+
+
+def resolve_device_engines(resolved: dict[str, Resolved], device: str) -> None:
+    """A splat stage's engine ``auto`` becomes gsplat on cuda and the CPU rasterizer otherwise, before
+    the cache key is made: the key names the rasterizer that really ran."""
+    for r in resolved.values():
+        if r.engine == "auto" and "gsplat" in r.stage.engines:
+            r.engine = "gsplat" if device == "cuda" else "cpu"
+            r.overrides["engine"] = f"auto on {device}"
 
 
 def cuda_present() -> bool:
@@ -229,7 +255,7 @@ class _SceneRun:
         self.t0: dict[str, float] = {}
         self.summary: dict[str, Any] = {"pipeline": str(ctx.pipe.path), "store": str(ctx.store.root),
                                         "prompt": ctx.prompt, "profile": ctx.profile, "seed": ctx.seed,
-                                        "stages": {}, "ok": False}
+                                        "device": ctx.device, "stages": {}, "ok": False}
         if scene.label:
             self.summary.update(label=scene.label, sets=list(scene.sets))
 
@@ -269,6 +295,7 @@ def run_batch(scenes: list[Scene], display, lock_message=print, executor=None) -
         for n in st.order:
             if n not in st.ctx.uses and n in st.selected:
                 check_files(pipe, n)
+        check_weights(st)
     if opts.dry_run:
         return {"dry_run": True, "ok": True,
                 "scenes": [{**dry_run(st.ctx, st.order, st.selected, st.forced),
@@ -317,6 +344,27 @@ def run_batch(scenes: list[Scene], display, lock_message=print, executor=None) -
         err.batch = batch
         raise err
     return batch
+
+
+def check_weights(st: "_SceneRun") -> None:
+    """Before any step starts: every model the selected real-model engines load is here, or one
+    PipelineError line names what is missing and the command that lists how to get it."""
+    from .models import ENGINE_MODELS
+
+    ctx = st.ctx
+    wanted = {n: ctx.resolved[n] for n in st.order
+              if n in st.selected and n not in ctx.uses and ctx.resolved[n].engine in ENGINE_MODELS}
+    if not wanted:
+        return
+    from .models import needs
+
+    missing = [m for m in needs(wanted) if not m.present]
+    if missing:
+        names = ", ".join(f"{m.stage}.{m.param} ({m.model or m.role})" for m in missing[:3])
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise PipelineError(f"{len(missing)} model(s) not found locally: {names}{more}; fix: "
+                            f"`holoflow models list --profile {ctx.profile}` says where each comes from "
+                            f"(or `holoflow models random DIR` + --models DIR for random weights)")
 
 
 def make_executor_for(opts: Options, device: str, display):
@@ -490,11 +538,19 @@ class _Scheduler:
         seconds = time.monotonic() - st.t0[name]
         self.display.end_step(st.name(name), self.done, self.total, entry["how"], seconds if ran else 0.0, note)
         entry["seconds"] = round(seconds, 3)
+        entry["engine"] = st.ctx.resolved[name].engine if entry["how"] != "used" else "used"
+        entry["device"] = st.ctx.device if ran else _made_on(st.ctx.store, entry.get("key"))
         entry["outputs"] = {k: v["digest"] for k, v in st.outputs[name].items()}
         st.summary["stages"][name] = entry
         if st.run_id is not None:
             st.ctx.store.link_outputs(st.run_id, name, st.outputs[name])
             _write_run(st, latest=len(self.states) == 1)      # a killed run keeps what it finished
+
+
+def _made_on(store: Store, key: str | None) -> str | None:
+    """The device a cached step's record says it ran on (None for used files)."""
+    rec = store.record(key) if key else None
+    return rec["provenance"].get("device") if rec else None
 
 
 def _finish_run(st: _SceneRun, latest: bool) -> None:

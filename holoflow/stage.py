@@ -54,6 +54,9 @@ class Job:
         argv = sys.argv[1:] if argv is None else argv
         if len(argv) != 1:
             raise SystemExit("usage: STAGE_PROGRAM JOB.json  (started by `holoflow run`)")
+        import atexit
+
+        atexit.register(_gpu_peak_meta)
         return cls.load(argv[0])
 
     def input(self, name: str) -> Path:
@@ -115,6 +118,15 @@ def run_main(main: Callable[[], int], stage: str) -> NoReturn:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         sys.exit(f"{stage}: {first}")
     sys.exit(code)
+
+
+def _gpu_peak_meta() -> None:
+    """At a step's exit: the peak GPU memory torch allocated (MiB) and the GPU's name, when the step
+    used CUDA (torch imported and its CUDA context made); nothing otherwise."""
+    torch = sys.modules.get("torch")
+    if torch is not None and torch.cuda.is_initialized():
+        emit("meta", {"gpu_peak_mb": round(torch.cuda.max_memory_allocated() / 2**20, 1),
+                      "gpu": torch.cuda.get_device_name()})
 
 
 def emit(kind: str, payload: dict[str, Any]) -> None:

@@ -20,7 +20,7 @@ def main() -> int:
     from holoflow.splat import GaussianModel
 
     p = job.params
-    model = GaussianModel.load_ply(job.input_file("gaussians", "gaussians.ply"))
+    model = GaussianModel.load_ply(job.input_file("gaussians", "gaussians.ply")).to(job.device)
     views, cams = load_view_set(job.input("pcd"), alpha_is_mask=True)
     rgb, alpha, depth = render_views(model, views, "auto", with_depth=True)   # [N, H, W, 3], 2 x [N, H, W, 1]
     rgb, alpha, depth = rgb.numpy(), alpha[..., 0].numpy(), depth[..., 0].numpy()

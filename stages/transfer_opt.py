@@ -20,7 +20,7 @@ def main() -> int:
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
     inp_views, _ = load_view_set(job.input("inp"), alpha_is_mask=False) if p.get("use_inp", True) else ([], None)
     model, log = transfer_optimize(xyz, rgb, pano_views, inp_views, p, job.engine, job.seed,
-                                   progress=lambda d, n: job.progress(d, n, "iters"))
+                                   progress=lambda d, n: job.progress(d, n, "iters"), device=job.device)
     save_result(job, model, log, pano_views, "scene.ply")         # G1, its fit and train_log.json
     write_previews(model, job.output_dir / "previews", pano_views[0]["K"], job.engine,
                    size=int(p.get("preview_size", 128)))

@@ -51,12 +51,14 @@ def render_at(model, viewmats: torch.Tensor, K: torch.Tensor, size: int, backend
     own image size (2 cx) to ``size`` so the field of view is kept."""
     from holoflow.splat import render
 
-    Ks = (K * (size / (2 * float(K[0, 2])))).clone()
+    dev = model.means.device
+    Ks = (K * (size / (2 * float(K[0, 2])))).clone().to(dev)
     Ks[2, 2] = 1.0
     out = []
     for s in range(0, len(viewmats), 8):
-        vm = viewmats[s:s + 8]
-        out.append(render(model, vm, Ks[None].expand(len(vm), 3, 3), size, size, backend=backend)["rgb"].clamp(0, 1))
+        vm = viewmats[s:s + 8].to(dev)
+        out.append(render(model, vm, Ks[None].expand(len(vm), 3, 3), size, size,
+                          backend=backend)["rgb"].clamp(0, 1).cpu())
     return torch.cat(out)
 
 

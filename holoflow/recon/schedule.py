@@ -24,9 +24,10 @@ Progress = Callable[[int, int], None]
 TRAIN_SEED_STRIDE = 1_000_003   # train_seed k moves every phase's seed by k x this (a prime, far from 1000 i)
 
 
-def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float = 0.1):
+def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float = 0.1, device: str = "cpu"):
     """Gaussians (SH degree 0) at the points xyz [N, 3] metres, coloured rgb [N, 3] uint8 (sRGB), with
-    initial ``opacity`` (3DGS: 0.1; a surface point cloud tolerates more, which shortens training)."""
+    initial ``opacity`` (3DGS: 0.1; a surface point cloud tolerates more, which shortens training), on
+    ``device``."""
     from holoflow.splat import GaussianModel
 
     if len(xyz) == 0:
@@ -34,7 +35,7 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float = 0.1):
     if not 0.0 < opacity < 1.0:
         raise ValueError(f"init_opacity must be in (0, 1), got {opacity}")
     return GaussianModel.from_points(np.asarray(xyz, np.float32), np.asarray(rgb_u8, np.float32) / 255.0,
-                                     sh_degree=0, opacity=opacity)
+                                     sh_degree=0, opacity=opacity).to(device)
 
 
 def panorama_extent(xyz: np.ndarray) -> float:
@@ -115,10 +116,10 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, b
 
 def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pano_views: list[dict],
                  params: dict, backend: str, seed: int,
-                 progress: Progress | None = None):
-    """G0: init from P_f, ``pcd_iters`` on the PCD set (masked), then ``pano_iters`` on the PANO set.
-    Returns (model, log)."""
-    model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)))
+                 progress: Progress | None = None, device: str = "cpu"):
+    """G0: init from P_f, ``pcd_iters`` on the PCD set (masked), then ``pano_iters`` on the PANO set,
+    trained on ``device``. Returns (model, log)."""
+    model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)), device)
     log = run_phases(model, [("pcd", pcd_views, int(params["pcd_iters"])),
                              ("pano", pano_views, int(params["pano_iters"]))], params, backend, seed, progress,
                      panorama_extent(xyz))
@@ -127,10 +128,10 @@ def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pan
 
 def transfer_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pano_views: list[dict], inp_views: list[dict],
                       params: dict, backend: str, seed: int,
-                      progress: Progress | None = None):
+                      progress: Progress | None = None, device: str = "cpu"):
     """G1: fresh init from P_f, ``iters`` on PANO + INP sets together (INP left out when
-    ``params['use_inp']`` is false: the paper's ablation). Returns (model, log)."""
-    model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)))
+    ``params['use_inp']`` is false: the paper's ablation), trained on ``device``. Returns (model, log)."""
+    model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)), device)
     views = pano_views + (inp_views if params.get("use_inp", True) else [])
     log = run_phases(model, [("pano+inp" if params.get("use_inp", True) else "pano", views,
                               int(params["iters"]))], params, backend, seed, progress, panorama_extent(xyz))
@@ -164,7 +165,7 @@ def score_views(model, views: list[dict], backend: str) -> dict:
     """PSNR (dB, masked by the views' masks when they have them), SSIM (unmasked sets only) and empty
     fraction of ``model`` against the views' own images: the fit to the training set."""
     rgb, alpha = render_views(model, views, backend)
-    target = torch.stack([v["image"] for v in views])
+    target = torch.stack([v["image"] for v in views]).cpu()
     masks = [v["mask"] for v in views]
     mask = torch.stack(masks) if all(m is not None for m in masks) else None
     p = metrics.psnr(rgb, target, mask)

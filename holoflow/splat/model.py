@@ -42,6 +42,11 @@ class GaussianModel:
     def params(self) -> dict[str, torch.Tensor]:
         return {name: getattr(self, name) for name in self.PARAMS}
 
+    def to(self, device: str | torch.device) -> "GaussianModel":
+        """The same Gaussians as fresh leaf tensors on ``device`` (cpu, cuda)."""
+        return GaussianModel(**{k: getattr(self, k).detach().to(device) for k in self.PARAMS},
+                             sh_degree=self.sh_degree)
+
     @classmethod
     def from_points(cls, xyz, rgb, sh_degree: int = 0, opacity: float = 0.1) -> "GaussianModel":
         """Init from a coloured point cloud (3DGS recipe): xyz [N, 3] metres, rgb [N, 3] in [0, 1];
@@ -75,13 +80,14 @@ class GaussianModel:
         from holoflow.io.ply import write_gaussians
 
         with torch.no_grad():
-            f = {k: v for k, v in zip("xyz", self.means.T.numpy())}
-            f.update({f"f_dc_{i}": self.sh_dc[:, 0, i].numpy() for i in range(3)})
-            rest = self.sh_rest.transpose(1, 2).reshape(len(self), -1).numpy()   # [N, 3 (K-1)]
+            m = self.to("cpu")
+            f = {k: v for k, v in zip("xyz", m.means.T.numpy())}
+            f.update({f"f_dc_{i}": m.sh_dc[:, 0, i].numpy() for i in range(3)})
+            rest = m.sh_rest.transpose(1, 2).reshape(len(m), -1).numpy()   # [N, 3 (K-1)]
             f.update({f"f_rest_{i}": rest[:, i] for i in range(rest.shape[1])})
-            f["opacity"] = self.opacity_logits.numpy()
-            f.update({f"scale_{i}": self.log_scales[:, i].numpy() for i in range(3)})
-            f.update({f"rot_{i}": self.quats[:, i].numpy() for i in range(4)})
+            f["opacity"] = m.opacity_logits.numpy()
+            f.update({f"scale_{i}": m.log_scales[:, i].numpy() for i in range(3)})
+            f.update({f"rot_{i}": m.quats[:, i].numpy() for i in range(4)})
         write_gaussians(path, f)
 
     @classmethod

@@ -128,6 +128,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
     log = dict(config=asdict(cfg), seed=seed, extent=extent, initial_count=n, loss=[], count=[],
                densify=[], notes=[])
     order: list[int] = []
+    on_dev = _views_on(views, dev)                                  # images, masks, Ks moved once
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
         frac = min(it / max(lr_steps, 1), 1.0)
@@ -136,19 +137,17 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
         if not order:
             order = torch.randperm(len(views), generator=gen).tolist()
         order_i = order.pop()
-        v = views[order_i]
-        image = torch.as_tensor(v["image"], dtype=torch.float32).to(dev)
+        v = on_dev[order_i]
+        image = v["image"]
         H, W = image.shape[:2]
         sh_degree = min(model.sh_degree, (it - 1) // max(cfg.sh_degree_every, 1))
-        out = render(model, viewmats[order_i][None],
-                     torch.as_tensor(v["K"], dtype=torch.float32).to(dev)[None], W, H, backend=cfg.backend,
+        out = render(model, viewmats[order_i][None], v["K"][None], W, H, backend=cfg.backend,
                      background=bg, sh_degree=sh_degree)
         means2d = out["meta"]["means2d"]
         if means2d.requires_grad:
             means2d.retain_grad()
         mask = v.get("mask")
-        loss = masked_loss(out["rgb"][0], image, None if mask is None else torch.as_tensor(mask).to(dev),
-                           cfg.lambda_dssim)
+        loss = masked_loss(out["rgb"][0], image, mask, cfg.lambda_dssim)
         loss.backward()
         log["loss"].append(float(loss.detach()))
         with torch.no_grad():
@@ -176,6 +175,12 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
     log["time_s"] = time.perf_counter() - t0
     log["final_count"] = len(model)
     return log
+
+
+def _views_on(views: list[dict], dev: torch.device) -> list[dict]:
+    """image [H, W, 3], mask [H, W] (or None) and K [3, 3] of every view as float32 on ``dev``."""
+    f32 = lambda t: None if t is None else torch.as_tensor(t, dtype=torch.float32).to(dev)  # noqa: E731
+    return [dict(image=f32(v["image"]), mask=f32(v.get("mask")), K=f32(v["K"])) for v in views]
 
 
 def _zero_stats(n: int, device) -> dict[str, torch.Tensor]:
