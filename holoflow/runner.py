@@ -91,8 +91,8 @@ class Context:
         """Key components of stage ``name`` given its upstream stages' outputs."""
         s = self.pipe.stages[name]
         r = self.resolved[name]
-        paths = [self.pipe.program(name)] + [self.pipe.path_of(c) for c in s.code]
-        code = self.hasher.version(paths)
+        code = {**self.hasher.closure(self.pipe.program(name)),
+                **self.hasher.version([self.pipe.path_of(c) for c in s.code])}
         inputs = {inp: {"stage": up, "tree": tree_digest(outputs[up])} for inp, up in s.inputs.items()}
         prompt = None
         if s.prompt:
