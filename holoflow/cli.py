@@ -239,7 +239,8 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_status(args) -> int:
-    from .runner import Context, describe_ran, status
+    from .runner import Context
+    from .status import describe_ran, status
 
     pipe, store = _load(args)
     ctx = Context.build(pipe, store, _options(args))

@@ -2,10 +2,10 @@
 imported, so this stays cheap and never loads torch).
 
 A program's import closure is, transitively: ``import a.b`` (a and a.b), ``from a import b`` (a, and
-a.b when b is a submodule), relative imports, imports inside functions or ``try`` blocks, and the
-``__init__.py`` of every package on the way. A package whose ``__init__`` defines a module-level
-``__getattr__`` (PEP 562 lazy names, e.g. holoflow/scene) counts as importing all its direct
-submodules. Modules are looked up in the search roots in order, as Python would for a script: the
+a.b when b is a submodule), relative imports, imports inside functions or ``try`` blocks (not under
+``if TYPE_CHECKING:``, which never runs), and the ``__init__.py`` of every package on the way. A
+package whose ``__init__`` defines a module-level ``__getattr__`` (PEP 562 lazy names, e.g.
+holoflow/scene) counts as importing all its direct submodules. Modules are looked up in the search roots in order, as Python would for a script: the
 program's folder, then the pipeline's folder, then the folder holding the ``holoflow`` package (for
 ``holoflow`` only). Standard-library and third-party modules are outside the roots and not followed;
 neither are names built at run time (``importlib.import_module(name)``): a stage lists such files in
@@ -24,13 +24,20 @@ ImportRecord = tuple[int, str, list[str]]           # (level, module, imported n
 
 
 def parse_imports(tree: ast.Module) -> tuple[list[ImportRecord], bool]:
-    """(every import statement of the file, anywhere in it; whether it defines a module-level __getattr__)."""
+    """(every import statement of the file, anywhere in it but under ``if TYPE_CHECKING:``; whether it
+    defines a module-level __getattr__)."""
     records: list[ImportRecord] = []
-    for node in ast.walk(tree):
+    stack: list[ast.AST] = [tree]
+    while stack:
+        node = stack.pop()
         if isinstance(node, ast.Import):
             records.extend((0, alias.name, []) for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
             records.append((node.level, node.module or "", [alias.name for alias in node.names]))
+        elif isinstance(node, ast.If) and _is_type_checking(node.test):
+            stack.extend(reversed(node.orelse))         # the body never runs
+            continue
+        stack.extend(reversed(list(ast.iter_child_nodes(node))))
     lazy = any(isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.name == "__getattr__"
                for n in tree.body)
     return records, lazy
@@ -132,6 +139,11 @@ class ImportGraph:
         if name + ".py" in names:
             return Found(path + ".py", root, None)
         return None
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
 
 
 def _targets(records: list[ImportRecord], package: str) -> list[str]:
