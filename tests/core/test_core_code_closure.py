@@ -24,7 +24,8 @@ def _closure(root: Path, program: str) -> set[str]:
 
 def test_closure_follows_every_import_form(tmp_path):
     _write(tmp_path, {
-        "prog.py": "import pkg.mod\nfrom pkg import sub\n\ndef main():\n    from lazy import thing\n",
+        "prog.py": "import pkg.mod\nfrom pkg import sub\nif TYPE_CHECKING:\n    import other\n\n"
+                   "def main():\n    from lazy import thing\n",
         "pkg/__init__.py": "",
         "pkg/mod.py": "from . import rel\nfrom .deep.leaf import f\nimport numpy\n",
         "pkg/rel.py": "X = 1\n",
