@@ -13,12 +13,13 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from .pipeline import PipelineError
+from .pipeline import Pipeline, PipelineError
+from .runner import Context, Options, Scene
+from .store import Store
 
 
 @dataclass
@@ -128,14 +129,10 @@ def sweep(prompts: list[SceneSpec], grid: list[str]) -> list[SceneSpec]:
     return out
 
 
-# -- the batch command (holoflow run --prompts / holoflow sweep) ----------------------------------
-def run_scenes(args, pipe, store, specs: list[SceneSpec]) -> int:
-    """Run ``specs`` as one batch with the CLI's options; prints per-scene lines (or --json)."""
-    from .cli import _options
-    from .progress import make_display
-    from .runner import Context, Scene, StepFailed, run_batch
-
-    base = _options(args)
+# -- scenes for the runner -------------------------------------------------------------------------
+def make_scenes(pipe: Pipeline, store: Store, base: Options, specs: list[SceneSpec]) -> list[Scene]:
+    """One labelled scene (s1, s2, ...) per spec: ``base`` options with the spec's prompt and seed (when
+    given) and its ``--set`` items after the base ones; the scenes share one code hasher."""
     scenes = []
     hasher = None
     for i, spec in enumerate(specs, 1):
@@ -147,33 +144,4 @@ def run_scenes(args, pipe, store, specs: list[SceneSpec]) -> int:
             raise PipelineError(f"scene s{i}: {e}") from None
         hasher = ctx.hasher
         scenes.append(Scene(ctx, opts, label=f"s{i}", sets=spec.sets))
-    out = sys.stderr if args.json else sys.stdout
-    display = make_display(out, fancy=None if not args.json else False)
-    err = None
-    try:
-        with display:
-            batch = run_batch(scenes, display, lock_message=lambda m: print(f"holoflow: {m}", file=sys.stderr))
-    except StepFailed as e:
-        err = e
-        batch = {**e.batch, "error": str(e).splitlines()[0]}
-    if args.json:
-        print(json.dumps(batch, indent=1))
-    elif base.dry_run:
-        for sc in batch["scenes"]:
-            for name, st in sc["stages"].items():
-                why = f"  ({'; '.join(st['reasons'])})" if st["reasons"] else ""
-                print(f"{sc.get('label', ''):<4} {name:<16} {st['how']:<8}{why}")
-    else:
-        for sc, spec in zip(batch["scenes"], specs):
-            counts: dict[str, int] = {}
-            for st in sc["stages"].values():
-                counts[st["how"]] = counts.get(st["how"], 0) + 1
-            done = ", ".join(f"{n} {h}" for h, n in counts.items()) or "nothing"
-            sets = f" [{' '.join(spec.sets)}]" if spec.sets else ""
-            print(f"{sc['label']}: {done}; run {sc.get('run')}; {json.dumps(sc['prompt'])}{sets}", file=out)
-        print(f"holoflow: batch of {len(specs)} scenes done in {batch['seconds']:.2f} s "
-              f"({batch.get('executor', 'all cached')}); runs pinned, latest -> the last scene", file=out)
-    if err is not None:
-        print(f"holoflow: {err}", file=sys.stderr)
-        return 1
-    return 0
+    return scenes

@@ -1,10 +1,12 @@
 """Cache keys: what determines a step's result, hashed; and why two keys differ, in words.
 
 key = sha256(canonical JSON of {stage, code, engine, params, inputs, seed[, prompt]}) where
-- ``code`` maps each source file (the stage program + files under the stage's ``code:`` paths,
-  relative to pipeline.yaml's folder) to its digest. A ``.py`` file is hashed through its AST, so
-  comments and formatting do not invalidate the cache; other files by their bytes. Digests are cached
-  by (path, size, mtime_ns) in the store's cache/code.json, so an unchanged tree costs one stat per file.
+- ``code`` maps each source file to its digest: the stage program, every project file it imports
+  (its import closure, holoflow/imports.py), and the files under the stage's ``code:`` paths; named
+  relative to pipeline.yaml's folder (a file outside it: relative to its search root, e.g.
+  holoflow/stage.py). A ``.py`` file is hashed through its AST, so comments and formatting do not
+  invalidate the cache; other files by their bytes. Digests and import lists are cached by
+  (path, size, mtime_ns) in the store's cache/code.json, so an unchanged tree costs one stat per file.
 - ``inputs`` maps each input name to {stage, tree}: tree = sha256 of the upstream step's output map
   (relative file name -> object digest). Downstream keys depend on upstream OUTPUT bytes, so a rerun
   that reproduces the same bytes leaves them unchanged (early cutoff).
@@ -22,6 +24,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from .imports import HOLOFLOW_ROOT, ImportGraph, parse_imports
 from .store import canonical_json, sha256_bytes
 
 _SKIP_DIRS = {"__pycache__", ".git", ".pytest_cache", ".mypy_cache", ".ipynb_checkpoints"}
@@ -29,7 +32,8 @@ _SKIP_SUFFIXES = {".pyc", ".pyo", ".swp", ".tmp"}
 
 
 class CodeHasher:
-    """Source digests cached by (size, mtime_ns); ``save()`` writes the cache back if it changed.
+    """Source digests and import lists cached by (size, mtime_ns); ``save()`` writes the cache back if
+    it changed.
 
     Paths are handled as strings: this runs for every stage on every `status`, so it stays cheap.
     """
@@ -40,7 +44,8 @@ class CodeHasher:
         self._cache: dict[str, list] = {}
         self._dirty = False
         self._walked: dict[str, list[tuple[str, str]]] = {}      # path -> [(absolute, relative)]
-        self._seen: dict[str, str] = {}
+        self._seen: dict[str, list] = {}
+        self._graphs: dict[str, ImportGraph] = {}                # program folder -> its import graph
         if cache_file is not None:
             try:
                 self._cache = json.loads(cache_file.read_text())
@@ -52,26 +57,62 @@ class CodeHasher:
         out = {}
         for p in map(str, paths):
             if p not in self._walked:
-                self._walked[p] = [(f, f[len(self.root):] if f.startswith(self.root) else f) for f in _walk(p)]
+                self._walked[p] = [(f, self._relative(f, None)) for f in _walk(p)]
             for f, rel in self._walked[p]:
                 out[rel] = self.digest(f)
         return out
 
+    def closure(self, program: Path) -> dict[str, str]:
+        """{name: digest} of ``program`` and every project file it imports (holoflow/imports.py)."""
+        prog = str(program)
+        out = {self._relative(prog, None): self.digest(prog)}
+        if not prog.endswith(".py"):
+            return out
+        folder = os.path.dirname(prog)
+        if folder not in self._graphs:
+            roots = [(folder, None), (self.root.rstrip("/"), None), (HOLOFLOW_ROOT, frozenset({"holoflow"}))]
+            self._graphs[folder] = ImportGraph(roots, self.imports)
+        for f, root in self._graphs[folder].closure(prog).items():
+            out[self._relative(f, root)] = self.digest(f)
+        return out
+
     def digest(self, path: str) -> str:
         """Digest of one source file: one stat per process, a rehash only when (size, mtime_ns) moved."""
+        return self._entry(path)[2]
+
+    def imports(self, path: str) -> tuple[list, bool]:
+        """``parse_imports`` of one Python file, cached like its digest."""
+        entry = self._entry(path)
+        return entry[3], entry[4]
+
+    def _entry(self, path: str) -> list:
+        """[size, mtime_ns, digest] (+ [imports, lazy] for a .py file), from the cache when current."""
         if path in self._seen:
             return self._seen[path]
         st = os.stat(path)
+        python = path.endswith(".py")
         hit = self._cache.get(path)
-        if hit and hit[0] == st.st_size and hit[1] == st.st_mtime_ns:
-            d = hit[2]
+        if hit and hit[0] == st.st_size and hit[1] == st.st_mtime_ns and len(hit) == (5 if python else 3):
+            entry = hit
         else:
             with open(path, "rb") as f:
-                d = source_digest(os.path.splitext(path)[1], f.read())
-            self._cache[path] = [st.st_size, st.st_mtime_ns, d]
+                data = f.read()
+            tree = _python_tree(data) if python else None
+            entry = [st.st_size, st.st_mtime_ns, _digest(tree, data)]
+            if python:
+                entry += list(parse_imports(tree)) if tree is not None else [[], False]
+            self._cache[path] = entry
             self._dirty = True
-        self._seen[path] = d
-        return d
+        self._seen[path] = entry
+        return entry
+
+    def _relative(self, path: str, root: str | None) -> str:
+        """``path`` relative to the pipeline's folder, else to its search root, else absolute."""
+        if path.startswith(self.root):
+            return path[len(self.root):]
+        if root is not None:
+            return os.path.relpath(path, root)
+        return path
 
     def save(self) -> None:
         if self._dirty and self.cache_file is not None:
@@ -98,12 +139,19 @@ def _walk(p: str) -> list[str]:
 
 def source_digest(suffix: str, data: bytes) -> str:
     """sha256 of a source file; for Python, of its AST (comments and layout do not count)."""
-    if suffix == ".py":
-        try:
-            tree = ast.parse(data)
-            return "ast:" + sha256_bytes(ast.dump(tree, annotate_fields=False).encode())
-        except (SyntaxError, ValueError):
-            pass
+    return _digest(_python_tree(data) if suffix == ".py" else None, data)
+
+
+def _python_tree(data: bytes) -> ast.Module | None:
+    try:
+        return ast.parse(data)
+    except (SyntaxError, ValueError):
+        return None
+
+
+def _digest(tree: ast.Module | None, data: bytes) -> str:
+    if tree is not None:
+        return "ast:" + sha256_bytes(ast.dump(tree, annotate_fields=False).encode())
     return sha256_bytes(data)
 
 

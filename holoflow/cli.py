@@ -190,47 +190,22 @@ def _options(args):
 
 # -- commands --------------------------------------------------------------------------------------
 def cmd_run(args) -> int:
-    from .progress import make_display
-    from .runner import Context, StepFailed, run
+    from .runner import Context, Scene
 
     pipe, store = _load(args)
+    opts = _options(args)
     if args.prompts:
-        from .batch import SceneSpec, read_prompts, run_scenes
+        from .batch import SceneSpec, make_scenes, read_prompts
 
         specs = read_prompts(args.prompts)
         if args.prompt is not None:
             specs = [SceneSpec(args.prompt)] + specs
-        return run_scenes(args, pipe, store, specs)
-    opts = _options(args)
-    ctx = Context.build(pipe, store, opts)
-    out = sys.stderr if args.json else sys.stdout
-    display = make_display(out, fancy=None if not args.json else False)
-    try:
-        with display:
-            summary = run(ctx, opts, display, lock_message=lambda m: print(f"holoflow: {m}", file=sys.stderr))
-    except StepFailed as e:
-        if args.json:
-            print(json.dumps({"ok": False, "error": str(e).splitlines()[0]}))
-        print(f"holoflow: {e}", file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps(summary, indent=1))
-    elif opts.dry_run:
-        for name, st in summary["stages"].items():
-            why = f"  ({'; '.join(st['reasons'])})" if st["reasons"] else ""
-            print(f"{name:<16} {st['how']:<8}{why}")
-    else:
-        counts = {}
-        for st in summary["stages"].values():
-            counts[st["how"]] = counts.get(st["how"], 0) + 1
-        done = ", ".join(f"{n} {h}" for h, n in counts.items()) or "nothing selected"
-        where = f"; outputs in {store.run_dir(summary['run'])}" if summary.get("run") else ""
-        print(f"holoflow: done in {summary['seconds']:.2f} s ({done}){where}", file=out)
-    return 0
+        return _run_scenes(args, make_scenes(pipe, store, opts, specs), batch=True)
+    return _run_scenes(args, [Scene(Context.build(pipe, store, opts), opts)], batch=False)
 
 
 def cmd_sweep(args) -> int:
-    from .batch import SceneSpec, read_prompts, run_scenes, sweep
+    from .batch import SceneSpec, make_scenes, read_prompts, sweep
 
     pipe, store = _load(args)
     if not args.grid:
@@ -239,11 +214,39 @@ def cmd_sweep(args) -> int:
     prompts = read_prompts(args.prompts) if args.prompts else []
     if args.prompt is not None or not prompts:
         prompts = [SceneSpec(args.prompt)] + prompts
-    return run_scenes(args, pipe, store, sweep(prompts, args.grid))
+    return _run_scenes(args, make_scenes(pipe, store, _options(args), sweep(prompts, args.grid)), batch=True)
+
+
+def _run_scenes(args, scenes, batch: bool) -> int:
+    """Run one scene, or a batch (``run --prompts``, ``sweep``); print its summary (or --json)."""
+    from .progress import make_display
+    from .runner import StepFailed, run_batch
+    from .summary import summary_lines
+
+    display = make_display(sys.stderr if args.json else sys.stdout, fancy=None if not args.json else False)
+    err = None
+    try:
+        with display:
+            result = run_batch(scenes, display, lock_message=lambda m: print(f"holoflow: {m}", file=sys.stderr))
+    except StepFailed as e:
+        err = e
+        result = {**e.batch, "error": str(e).splitlines()[0]}
+    if not batch:
+        result = result["scenes"][0] if err is None else {"ok": False, "error": result["error"]}
+    if args.json:
+        print(json.dumps(result, indent=1))
+    elif err is None or batch:
+        for line in summary_lines(result, scenes[0].ctx.store):
+            print(line)
+    if err is not None:
+        print(f"holoflow: {err}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def cmd_status(args) -> int:
-    from .runner import Context, describe_ran, status
+    from .runner import Context
+    from .status import describe_ran, status
 
     pipe, store = _load(args)
     ctx = Context.build(pipe, store, _options(args))

@@ -22,6 +22,7 @@ import json
 import math
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from holoflow.bench import machine
@@ -143,42 +144,78 @@ def score(model, viewmats, K, targets, backend: str, iqa_dir=None, hidden=None) 
     return out, rgb
 
 
-def evaluate_run(run_dir: Path, novel: int, offset: float, supp: int, seed: int, backend: str,
-                 iqa_dir=None, cache: dict | None = None) -> dict:
-    """Scores of G0 and G1 of one pipeline run (folder runs/<id>/ with one folder per stage):
-    ``novel`` random cameras, a seeded subset of ``supp`` supplementary cameras (0 = all)."""
+@dataclass
+class Views:
+    """Cameras to score a model at: viewmats [C, 4, 4] (world-to-camera), K [3, 3], targets [C, H, W, 3]
+    sRGB; optionally hidden [C, H, W] bool (surface hidden from the centre, see ``score``) and the
+    folder of the BRISQUE model (``iqa_dir``)."""
+
+    viewmats: "torch.Tensor"
+    K: "torch.Tensor"
+    targets: "torch.Tensor"
+    hidden: "torch.Tensor | None" = None
+    iqa_dir: str | None = None
+
+
+MODELS = (("G0", "pre_opt", "gaussians.ply"), ("G1", "transfer_opt", "scene.ply"))
+
+
+def base_views(run_dir: Path) -> tuple["Scene", Views]:
+    """The procedural scene of a run folder (runs/<id>/) and its base cameras with the PANO set as
+    targets (the paper's protocol)."""
     import torch
 
-    from holoflow.recon.views import intrinsics, load_view_set, read_cameras
+    from holoflow.recon.views import intrinsics, load_view_set
     from holoflow.scene.model import Scene
-    from holoflow.splat import GaussianModel
 
     scene_file = run_dir / "base_pano" / "scene.json"
     if not scene_file.is_file():
         raise SystemExit(f"eval: {scene_file} missing: eval needs the procedural base_pano engine (truth)")
     scene = Scene.from_json(scene_file.read_text())
     pano_views, cams = load_view_set(run_dir / "pano_set", alpha_is_mask=False)
-    K, w, h = intrinsics(cams), int(cams["width"]), int(cams["height"])
-    base_vm = torch.stack([v["viewmat"] for v in pano_views])
-    base_tgt = torch.stack([v["image"] for v in pano_views])
+    return scene, Views(torch.stack([v["viewmat"] for v in pano_views]), intrinsics(cams),
+                        torch.stack([v["image"] for v in pano_views]))
+
+
+def score_models(run_dir: Path, views: dict[str, Views], backend: str) -> tuple[dict, dict]:
+    """G0 (pre_opt) and G1 (transfer_opt) of a run folder scored at each view set (``score``):
+    ({tag: {gaussians, set name: scores}}, {tag: {set name: renders [C, H, W, 3]}})."""
+    from holoflow.splat import GaussianModel
+
+    result: dict = {}
+    renders: dict = {}
+    for tag, stage, file in MODELS:
+        model = GaussianModel.load_ply(run_dir / stage / file)
+        result[tag], renders[tag] = {"gaussians": len(model)}, {}
+        for name, v in views.items():
+            result[tag][name], renders[tag][name] = score(model, v.viewmats, v.K, v.targets, backend, v.iqa_dir,
+                                                          v.hidden)
+    return result, renders
+
+
+def evaluate_run(run_dir: Path, novel: int, offset: float, supp: int, seed: int, backend: str,
+                 iqa_dir=None, cache: dict | None = None) -> dict:
+    """Scores of G0 and G1 of one pipeline run (folder runs/<id>/ with one folder per stage):
+    ``novel`` random cameras, a seeded subset of ``supp`` supplementary cameras (0 = all)."""
+    import torch
+
+    from holoflow.recon.views import read_cameras
+
+    scene, base = base_views(run_dir)
+    K, h, w = base.K, int(base.targets.shape[1]), int(base.targets.shape[2])
     supp_vm = torch.stack([torch.tensor(v["viewmat"], dtype=torch.float32).reshape(4, 4)
                            for v in read_cameras(run_dir / "pcd_set")["views"]])
     if 0 < supp < len(supp_vm):
         pick = torch.randperm(len(supp_vm), generator=torch.Generator().manual_seed(seed))[:supp]
         supp_vm = supp_vm[pick.sort().values]
     novel_vm = novel_cameras(scene, novel, offset, seed, K)
-    supp_tgt = true_views(scene, supp_vm, K, w, h, cache=cache)
-    novel_tgt = true_views(scene, novel_vm, K, w, h, cache=cache)
-    supp_hidden = hidden_masks(scene, supp_vm, K, w, h)
-    novel_hidden = hidden_masks(scene, novel_vm, K, w, h)
-    result, renders = {}, {"truth": novel_tgt, "hidden": novel_hidden}
-    for tag, stage, file in (("G0", "pre_opt", "gaussians.ply"), ("G1", "transfer_opt", "scene.ply")):
-        model = GaussianModel.load_ply(run_dir / stage / file)
-        base, _ = score(model, base_vm, K, base_tgt, backend)
-        sup, _ = score(model, supp_vm, K, supp_tgt, backend, iqa_dir, supp_hidden)
-        nov, renders[tag] = score(model, novel_vm, K, novel_tgt, backend, iqa_dir, novel_hidden)
-        result[tag] = dict(gaussians=len(model), base=base, supp=sup, novel=nov)
-    result["_renders"] = renders
+    views = {"base": base}
+    for name, vm in (("supp", supp_vm), ("novel", novel_vm)):
+        views[name] = Views(vm, K, true_views(scene, vm, K, w, h, cache=cache), hidden_masks(scene, vm, K, w, h),
+                            iqa_dir)
+    result, renders = score_models(run_dir, views, backend)
+    result["_renders"] = {"truth": views["novel"].targets, "hidden": views["novel"].hidden,
+                          **{tag: r["novel"] for tag, r in renders.items()}}
     return result
 
 

@@ -1,5 +1,5 @@
 """The runner: plan a run (or a batch of scenes) over the DAG, serve cached steps, hand the rest to an
-executor, record the runs.
+executor, record the runs. What is fresh or stale and why: holoflow/status.py.
 
 A step runs as ``[python, PROGRAM, JOB.json]`` (or ``[PROGRAM, JOB.json]``) with no shell, its outputs
 in a staging folder under the store's tmp/; after exit 0 its outputs are hashed into objects/ and the
@@ -18,9 +18,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .cachekey import CodeHasher, cache_key, components, reasons, tree_digest
+from .cachekey import CodeHasher, cache_key, components, tree_digest
 from .executors import StepTask
 from .pipeline import Pipeline, PipelineError, Resolved, check_files, profile_device, resolve
+from .status import dry_run, explain
 from .store import Store
 
 
@@ -92,8 +93,8 @@ class Context:
         """Key components of stage ``name`` given its upstream stages' outputs."""
         s = self.pipe.stages[name]
         r = self.resolved[name]
-        paths = [self.pipe.program(name)] + [self.pipe.path_of(c) for c in s.code]
-        code = self.hasher.version(paths)
+        code = {**self.hasher.closure(self.pipe.program(name)),
+                **self.hasher.version([self.pipe.path_of(c) for c in s.code])}
         inputs = {inp: {"stage": up, "tree": tree_digest(outputs[up])} for inp, up in s.inputs.items()}
         prompt = None
         if s.prompt:
@@ -612,108 +613,3 @@ def _json_or_none(text: str):
         return json.loads(text)
     except ValueError:
         return None
-
-
-# -- dry run and status --------------------------------------------------------------------------
-def dry_run(ctx: Context, order: list[str], selected: set[str], forced: set[str]) -> dict[str, Any]:
-    """What a run would do, without locking or running anything."""
-    plan = status(ctx, order)
-    stages = {}
-    for name in order:
-        st = plan[name]
-        if name in ctx.uses:
-            how = "use"
-        elif name in forced or st["state"] != "fresh":
-            how = "run" if name in selected else "missing (not selected)"
-        else:
-            how = "cached"
-        stages[name] = {"how": how, "state": st["state"], "reasons": st["reasons"]}
-    return {"dry_run": True, "stages": stages, "ok": True}
-
-
-def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, Any]]:
-    """Per stage: state fresh | stale | missing, the reasons, and the key when it can be known."""
-    store = ctx.store
-    order = order or list(ctx.pipe.stages)
-    outputs: dict[str, dict] = {}
-    out: dict[str, dict[str, Any]] = {}
-    for name in order:
-        s = ctx.pipe.stages[name]
-        if name in ctx.uses:
-            out[name] = {"state": "fresh", "reasons": [f"used: {ctx.uses[name]}"], "key": None}
-            outputs[name] = _digests_of(ctx.uses[name], s.primary)
-            continue
-        if s.prompt and ctx.prompt is None:
-            out[name] = {"state": "missing", "key": None,
-                         "reasons": ["no prompt yet (holoflow status \"PROMPT\", or run once)"]}
-            continue
-        bad_up = [u for u in s.inputs.values() if u not in outputs]
-        if bad_up:
-            comp = ctx.components(name, {u: outputs.get(u, {}) for u in s.inputs.values()})
-            own = [r for r in explain(ctx, name, comp) if not r.startswith("input changed")]
-            own = [r for r in own if r not in ("never run", "key changed")]
-            ups = sorted(set(bad_up), key=list(ctx.pipe.stages).index)
-            never = store.last_key(name) is None
-            out[name] = {"state": "missing" if never else "stale", "key": None,
-                         "reasons": (["never run"] if never else own)
-                         + [f"upstream not fresh: {', '.join(ups)}"]}
-            continue
-        comp = ctx.components(name, outputs)
-        key = cache_key(comp)
-        rec = store.record(key)
-        if rec is not None:
-            missing = [rel for rel, e in rec["outputs"].items() if not store.check(e)]
-            if not missing:
-                out[name] = {"state": "fresh", "reasons": [], "key": key, "ran": ran_info(rec)}
-                outputs[name] = rec["outputs"]
-                continue
-            out[name] = {"state": "missing", "key": key,
-                         "reasons": [f"output missing or corrupted: {', '.join(missing[:3])}"]}
-            continue
-        why = explain(ctx, name, comp)
-        out[name] = {"state": "missing" if why == ["never run"] else "stale", "reasons": why,
-                     "key": key}
-    ctx.hasher.save()
-    return out
-
-
-def ran_info(rec: dict) -> dict[str, Any]:
-    """Where and with what a recorded step ran: host, executor, declared resources, wall, peak memory."""
-    prov = rec.get("provenance", {})
-    return {k: prov.get(k) for k in ("host", "executor", "resources", "attempt", "wall_s", "peak_rss_mb")}
-
-
-def describe_ran(info: dict[str, Any] | None) -> str:
-    """``ran_info`` in words: 'on vm (local; 1 cpu, 2 GB; 3.1 s, peak 210 MB)'."""
-    if not info or not info.get("host"):
-        return ""
-    res = info.get("resources") or {}
-    want = [f"{res.get('cpus', 1)} cpu"]
-    if res.get("gpus"):
-        want.append(f"{res['gpus']} gpu" + (f" #{res['gpu_ids']}" if res.get("gpu_ids") else ""))
-    if res.get("memory_gb"):
-        want.append(f"{res['memory_gb']:g} GB")
-    used = [f"{info['wall_s']:.1f} s"] if info.get("wall_s") is not None else []
-    if info.get("peak_rss_mb"):
-        used.append(f"peak {info['peak_rss_mb']:.0f} MB")
-    if (info.get("attempt") or 1) > 1:
-        used.append(f"attempt {info['attempt']}")
-    return f"on {info['host']} ({info.get('executor') or 'local'}; {', '.join(want)}; {', '.join(used)})"
-
-
-def explain(ctx: Context, name: str, comp: dict) -> list[str]:
-    last = ctx.store.last_key(name)
-    rec = ctx.store.record(last) if last else None
-    if rec is None:
-        return ["never run"]
-    return reasons(rec["components"], comp)
-
-
-def _digests_of(path: Path, primary: str | None) -> dict[str, dict]:
-    from .store import sha256_file
-
-    if path.is_dir():
-        return {p.relative_to(path).as_posix(): {"digest": sha256_file(p)} for p in sorted(path.rglob("*"))
-                if p.is_file()}
-    return {primary or path.name: {"digest": sha256_file(path)}}
-

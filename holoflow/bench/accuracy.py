@@ -126,31 +126,21 @@ def score_run(run_dir: Path, novel: int, novel_size: int, novel_fov: float, offs
               backend: str, cache: dict) -> dict:
     """Accuracy of one run folder: depth truth metrics, then G0 / G1 PSNR / SSIM at the base cameras
     (vs the PANO set) and at ``novel`` seeded cameras (vs true renders, ``novel_size`` px square,
-    ``novel_fov`` deg). Flat dict of floats."""
-    import torch
-
+    ``novel_fov`` deg), scored by ``holoflow.eval``. Flat dict of floats."""
     from holoflow import eval as heval
-    from holoflow.recon.views import intrinsics, load_view_set
-    from holoflow.scene.model import Scene
-    from holoflow.splat import GaussianModel
 
     depth = json.loads((run_dir / "metric_align" / "metric_align.json").read_text()).get("truth_metrics", {})
-    scene = Scene.from_json((run_dir / "base_pano" / "scene.json").read_text())
-    pano_views, cams = load_view_set(run_dir / "pano_set", alpha_is_mask=False)
-    base_K = intrinsics(cams)
-    base_vm = torch.stack([v["viewmat"] for v in pano_views])          # [M, 4, 4]
-    base_tgt = torch.stack([v["image"] for v in pano_views])           # [M, S, S, 3] sRGB
+    scene, base = heval.base_views(run_dir)
     K = novel_intrinsics(novel_size, novel_fov)
     novel_vm = heval.novel_cameras(scene, novel, offset, seed)         # [novel, 4, 4]
-    novel_tgt = heval.true_views(scene, novel_vm, K, novel_size, novel_size, cache=cache)
+    novel_views = heval.Views(novel_vm, K, heval.true_views(scene, novel_vm, K, novel_size, novel_size, cache=cache))
+    scores, _ = heval.score_models(run_dir, {"base": base, "novel": novel_views}, backend)
     out = {"abs_rel": depth.get("abs_rel", math.nan), "delta1": depth.get("delta1", math.nan)}
-    for tag, stage, file in (("g0", "pre_opt", "gaussians.ply"), ("g1", "transfer_opt", "scene.ply")):
-        model = GaussianModel.load_ply(run_dir / stage / file)
-        base, _ = heval.score(model, base_vm, base_K, base_tgt, backend)
-        nov, _ = heval.score(model, novel_vm, K, novel_tgt, backend)
-        out.update({f"{tag}_gaussians": len(model), f"{tag}_base_psnr": base["psnr"],
-                    f"{tag}_base_ssim": base["ssim"], f"{tag}_novel_psnr": nov["psnr"],
-                    f"{tag}_novel_ssim": nov["ssim"], f"{tag}_novel_empty": nov["empty"]})
+    for tag, s in scores.items():
+        t = tag.lower()
+        out.update({f"{t}_gaussians": s["gaussians"], f"{t}_base_psnr": s["base"]["psnr"],
+                    f"{t}_base_ssim": s["base"]["ssim"], f"{t}_novel_psnr": s["novel"]["psnr"],
+                    f"{t}_novel_ssim": s["novel"]["ssim"], f"{t}_novel_empty": s["novel"]["empty"]})
     return out
 
 

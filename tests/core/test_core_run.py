@@ -29,7 +29,9 @@ def test_record_has_provenance(project, capsys):
     assert prov["peak_rss_mb"] > 0 and prov["wall_s"] > 0
     log = (project.store / "objects" / prov["log"][:2] / prov["log"]).read_text()
     assert "@progress" in log
-    assert rec["components"]["code"].keys() == {"gen.py", "lib/helpers.py"}
+    # the program, what it imports (holoflow/stage.py and its package), and its `code:` folder
+    assert rec["components"]["code"].keys() == {"gen.py", "holoflow/__init__.py", "holoflow/stage.py",
+                                                "lib/helpers.py"}
 
 
 def test_force_reruns_one_step_and_cutoff_keeps_downstream(project, capsys):
