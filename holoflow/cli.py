@@ -159,19 +159,9 @@ def _load(args):
     from . import pipeline
     from .store import Store
 
-    path = _find_pipeline(args.pipeline)
+    path = pipeline.find_pipeline(args.pipeline)
     store = Store(args.store or os.environ.get("HOLOFLOW_STORE") or (path.parent / "artifacts"))
     return pipeline.load(path, cache_dir=store.root / "cache"), store
-
-
-def _find_pipeline(given: str) -> Path:
-    """The pipeline file; the default name is also looked for in parent folders (like git)."""
-    path = Path(given).absolute()
-    if given == "pipeline.yaml" and not path.exists():
-        for parent in path.parent.parents:
-            if (parent / given).is_file():
-                return parent / given
-    return path
 
 
 def _options(args):
@@ -264,7 +254,7 @@ def cmd_status(args) -> int:
 def cmd_dag(args) -> int:
     from . import pipeline
 
-    pipe = pipeline.load(_find_pipeline(args.pipeline))
+    pipe = pipeline.load(pipeline.find_pipeline(args.pipeline))
     if args.mermaid:
         print("flowchart TD")
         for s in pipe.stages.values():

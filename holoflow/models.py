@@ -165,10 +165,9 @@ def main(argv: list[str]) -> int:
         print(f"holoflow models: random {'full-size' if args.full else 'tiny'} models in {args.folder} "
               f"(noise images at the real compute cost); use: holoflow run --models {args.folder}")
         return 0
-    from .cli import _find_pipeline
-    from .pipeline import load, resolve
+    from .pipeline import find_pipeline, load, resolve
 
-    pipe = load(_find_pipeline(args.pipeline))
+    pipe = load(find_pipeline(args.pipeline))
     resolved = resolve(pipe, args.profile)
     if args.models:
         apply_manifest(resolved, Path(args.models))

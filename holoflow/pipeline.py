@@ -137,6 +137,16 @@ def _err(path: Path, stage: str | None, msg: str, fix: str) -> PipelineError:
     return PipelineError(f"{where}{msg}; fix: {fix}")
 
 
+def find_pipeline(given: str) -> Path:
+    """The pipeline file; the default name is also looked for in parent folders (like git)."""
+    path = Path(given).absolute()
+    if given == "pipeline.yaml" and not path.exists():
+        for parent in path.parent.parents:
+            if (parent / given).is_file():
+                return parent / given
+    return path
+
+
 def load(path: str | Path, cache_dir: Path | None = None) -> Pipeline:
     """Read and validate pipeline.yaml. Raises PipelineError (one line) on any mistake.
 

@@ -73,10 +73,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--screenshot-height", type=int, default=2400, help="screenshot height, CSS pixels")
     args = p.parse_args(argv)
 
-    from holoflow.cli import _find_pipeline
+    from holoflow.pipeline import find_pipeline
     from holoflow.store import Store
 
-    path = _find_pipeline(args.pipeline)
+    path = find_pipeline(args.pipeline)
     store = Store(args.store or os.environ.get("HOLOFLOW_STORE") or (path.parent / "artifacts"))
     try:
         order = _stage_order(path)
