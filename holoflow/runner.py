@@ -67,6 +67,7 @@ class Context:
     hasher: CodeHasher
     device: str
     verbose: bool = False
+    imports: dict[str, dict] = field(default_factory=dict)  # stage -> facts of an image --use (provenance)
 
     @classmethod
     def build(cls, pipe: Pipeline, store: Store, opts: Options, hasher: CodeHasher | None = None) -> "Context":
@@ -131,6 +132,8 @@ def import_use(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
         files = {p.relative_to(src).as_posix(): p for p in sorted(src.rglob("*")) if p.is_file()}
         if not files:
             raise PipelineError(f"--use {stage}={src}: the folder is empty; fix: point at the stage's files")
+    elif s.primary and s.primary.endswith(".exr") and src.suffix.lower() in _IMAGE_EXTS:
+        return _import_image(ctx, stage, src)
     else:
         name = s.primary or src.name
         if s.primary and Path(s.primary).suffix.lower() != src.suffix.lower():
@@ -146,6 +149,47 @@ def import_use(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
         shutil.copyfile(p, tmp)
         outputs[rel] = ctx.store.put(tmp)
         tmp.parent.rmdir()
+    return outputs
+
+
+_IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".hdr")  # holoflow.io.image.IMAGE_EXTS less .exr
+
+
+def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
+    """A photo / image panorama for an EXR stage: decoded to linear RGB (holoflow.io.image), written as
+    the stage's primary EXR; the facts (file, digest, colour handling, GPano) go to the run record."""
+    from .io.exr import write_rgb
+    from .io.image import ImageImportError, read_panorama_image
+
+    try:
+        rgb, facts = read_panorama_image(src)
+    except ImageImportError as e:
+        raise PipelineError(f"--use {stage}: {e}") from None
+    tmp = ctx.store.staging(f"use-{stage}") / "f.exr"
+    write_rgb(tmp, rgb, {"holoflow.source": facts["file"], "holoflow.source_sha256": facts["sha256"],
+                         "holoflow.source_colour": facts["colour"]})
+    out = {ctx.pipe.stages[stage].primary: ctx.store.put(tmp)}
+    tmp.parent.rmdir()
+    ctx.imports[stage] = facts
+    _import_cache(ctx, facts["sha256"], out)
+    return out
+
+
+def _import_cache(ctx: Context, source_sha: str, outputs: dict | None = None) -> dict | None:
+    """Remember (or look up) the outputs an image file imported to, by the file's sha256, so that
+    ``status`` sees the same input digests as the run without decoding the image again."""
+    path = ctx.store.root / "cache" / "imports.json"
+    try:
+        table = json.loads(path.read_text())
+    except (OSError, ValueError):
+        table = {}
+    if outputs is None:
+        return table.get(source_sha)
+    table[source_sha] = outputs
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(table, sort_keys=True))
+    os.replace(tmp, path)
     return outputs
 
 
@@ -393,8 +437,10 @@ class _Scheduler:
             if name in ctx.uses:
                 st.outputs[name] = import_use(ctx, name, ctx.uses[name])
                 st.ran.add(name)             # downstream of an import is not an early cutoff
-                self.resolved(st, name, {"how": "used", "source": str(ctx.uses[name]), "key": None},
-                              f" ({ctx.uses[name]})")
+                info = {"how": "used", "source": str(ctx.uses[name]), "key": None}
+                if name in ctx.imports:
+                    info["import"] = ctx.imports[name]
+                self.resolved(st, name, info, f" ({ctx.uses[name]})")
                 continue
             comp = ctx.components(name, st.outputs)
             key = cache_key(comp)
@@ -586,6 +632,9 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
         if name in ctx.uses:
             out[name] = {"state": "fresh", "reasons": [f"used: {ctx.uses[name]}"], "key": None}
             outputs[name] = _digests_of(ctx.uses[name], s.primary)
+            if s.primary and s.primary.endswith(".exr") and ctx.uses[name].suffix.lower() in _IMAGE_EXTS:
+                src_sha = outputs[name][s.primary]["digest"]
+                outputs[name] = _import_cache(ctx, src_sha) or outputs[name]  # the converted EXR's digest
             continue
         if s.prompt and ctx.prompt is None:
             out[name] = {"state": "missing", "key": None,
@@ -609,6 +658,9 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
             missing = [rel for rel, e in rec["outputs"].items() if not store.check(e)]
             if not missing:
                 out[name] = {"state": "fresh", "reasons": [], "key": key, "ran": ran_info(rec)}
+                meta = rec.get("provenance", {}).get("meta", {}).get("engine")
+                if isinstance(meta, dict) and meta.get("why"):  # an engine the step chose itself (auto)
+                    out[name]["engine"] = {"ran": meta.get("engine"), "why": meta["why"]}
                 outputs[name] = rec["outputs"]
                 continue
             out[name] = {"state": "missing", "key": key,
