@@ -45,6 +45,8 @@ class LayoutConfig:
     """the panorama is analysed at this width (height width / 2), pixels."""
     upright: bool = True
     """estimate the camera's tilt from vertical line segments and correct it."""
+    min_tilt_deg: float = 1.0
+    """degrees: a smaller estimated tilt is left alone (resampling costs more than it corrects)."""
     max_tilt_deg: float = 30.0
     """a vertical vanishing direction further than this from the image's up is not trusted (degrees)."""
     min_depth: float = 0.4
@@ -269,7 +271,20 @@ def estimate_layout_depth(pano: np.ndarray, cfg: LayoutConfig | None = None,
     work = work * (0.18 / med) if med > 1e-6 else work
     srgb = linear_to_uint8(np.clip(work, 0.0, 1.0))
     facts: dict = {"config": asdict(cfg), "work_size": [Wk, Hk]}
-    return _estimate(work, srgb, cfg, facts, H0, W0)
+    R = None
+    if cfg.upright:
+        from holoflow.depth.vanishing import rotate_equirect, rotation_to_upright, segment_normals, vertical_direction
+
+        v, facts["upright"] = vertical_direction(*segment_normals(srgb), cfg.max_tilt_deg)
+        if v is not None and facts["upright"]["tilt_deg"] > cfg.min_tilt_deg:
+            R = rotation_to_upright(v)
+            srgb = np.clip(rotate_equirect(srgb.astype(np.float64), R) + 0.5, 0, 255).astype(np.uint8)
+    est = _estimate(work, srgb, cfg, facts, H0, W0)
+    if R is not None:  # back to the input's frame: depth(d) = upright depth(R d), via disparity (sky 0)
+        disp = np.where(np.isfinite(est.depth), 1.0 / np.maximum(est.depth, 1e-9), 0.0)
+        disp = rotate_equirect(disp, R.T, mode="nearest")
+        est.depth = np.where(disp > 0, 1.0 / np.where(disp > 0, disp, 1.0), np.inf).astype(np.float32)
+    return est
 
 
 def _estimate(work, srgb, cfg, facts, H0, W0):
@@ -314,7 +329,11 @@ def _estimate(work, srgb, cfg, facts, H0, W0):
     _, ceiling, k = best
     d = dist[k]  # [Wk] horizontal wall distance per column, metres
     lat_f = -np.arctan(h / d)
-    lat_c = np.arctan(ceiling / d) if ceiling is not None else np.full(Wk, np.pi / 2)
+    if ceiling is not None:
+        lat_c = np.arctan(ceiling / d)
+    else:  # outdoors: the sky region around the zenith, its own boundary per column
+        lat_c = np.pi / 2 - np.pi * upper_boundary(pc, edges, lat, cfg) / Hk
+        lat_c = np.maximum(lat_c, lat_f + np.pi / Hk)  # the sky starts above the ground
     if ceiling is not None:
         facts["ceiling_above_eye_m"] = round(float(ceiling), 3)
     cols = (np.arange(W0) + 0.5) * Wk / W0 - 0.5
@@ -349,8 +368,8 @@ def classify_scene(lab: np.ndarray, lat: np.ndarray) -> tuple[str, str]:
     """
     cap = lab[lat > np.radians(45)]
     Lc, bc = cap[..., 0], cap[..., 2]
-    sky = (Lc > 55) & (bc < 0)  # blue sky; overcast skies are not recognised (docs)
+    sky = (Lc >= np.median(lab[..., 0])) & (bc < -5)  # blue and not darker than the typical pixel; overcast skies are not recognised (docs)
     frac = float(sky.mean()) if sky.size else 0.0
     if frac > 0.5:
-        return "outdoor", f"{frac:.0%} of the zenith cap is bright blue sky"
+        return "outdoor", f"{frac:.0%} of the zenith cap is bright blue sky (> 50%)"
     return "indoor", f"{frac:.0%} of the zenith cap looks like sky (needs > 50%)"
