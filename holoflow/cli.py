@@ -247,6 +247,8 @@ def cmd_status(args) -> int:
     width = max(len(n) for n in st)
     for name, s in st.items():
         why = "; ".join(s["reasons"]) or describe_ran(s.get("ran"))
+        if s.get("engine"):
+            why = f"engine {s['engine']['ran']} ({s['engine']['why']}); {why}"
         print(f"{name:<{width}}  {s['state']:<7}  {why}".rstrip())
     return 0
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import time
 from dataclasses import dataclass, field
@@ -22,6 +21,7 @@ from .cachekey import CodeHasher, cache_key, components, tree_digest
 from .executors import StepTask
 from .pipeline import Pipeline, PipelineError, Resolved, check_files, profile_device, resolve
 from .status import dry_run, explain
+from .uses import import_use, parse_uses
 from .store import Store
 
 
@@ -69,6 +69,7 @@ class Context:
     hasher: CodeHasher
     device: str
     verbose: bool = False
+    imports: dict[str, dict] = field(default_factory=dict)  # stage -> facts of an image --use (provenance)
 
     @classmethod
     def build(cls, pipe: Pipeline, store: Store, opts: Options, hasher: CodeHasher | None = None) -> "Context":
@@ -135,69 +136,6 @@ def cuda_present() -> bool:
     return os.path.exists("/proc/driver/nvidia/version") or os.path.exists("/dev/nvidia0")
 
 
-def parse_uses(pipe: Pipeline, uses: list[str]) -> dict[str, Path]:
-    out = {}
-    for item in uses:
-        if "=" not in item:
-            raise PipelineError(f"--use {item!r}: expected STAGE=PATH; fix: e.g. --use base_pano=my_pano.exr")
-        stage, path = item.split("=", 1)
-        if stage not in pipe.stages:
-            raise PipelineError(f"--use {item!r}: unknown stage '{stage}'; fix: use one of: "
-                                f"{', '.join(pipe.stages)}")
-        p = Path(path).expanduser().absolute()
-        if not p.exists():
-            raise PipelineError(f"--use {stage}={path}: no such file or folder; fix: check the path")
-        out[stage] = p
-    return out
-
-
-def import_use(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
-    """Validate the user's file(s) for ``stage`` and hash them into the store; returns the output map."""
-    s = ctx.pipe.stages[stage]
-    if src.is_dir():
-        files = {p.relative_to(src).as_posix(): p for p in sorted(src.rglob("*")) if p.is_file()}
-        if not files:
-            raise PipelineError(f"--use {stage}={src}: the folder is empty; fix: point at the stage's files")
-    else:
-        name = s.primary or src.name
-        if s.primary and Path(s.primary).suffix.lower() != src.suffix.lower():
-            raise PipelineError(f"--use {stage}={src}: {stage}'s main output is {s.primary}, got a "
-                                f"{src.suffix or 'suffix-less'} file; fix: convert it (e.g. oiiotool IN -o "
-                                f"OUT{Path(s.primary).suffix})")
-        files = {name: src}
-    for rel, p in files.items():
-        _validate_file(stage, p)
-    outputs = {}
-    for rel, p in files.items():
-        tmp = ctx.store.staging(f"use-{stage}") / "f"
-        shutil.copyfile(p, tmp)
-        outputs[rel] = ctx.store.put(tmp)
-        tmp.parent.rmdir()
-    return outputs
-
-
-def _validate_file(stage: str, p: Path) -> None:
-    ext = p.suffix.lower()
-    if ext == ".exr":
-        from .io.exr import ExrError, read_exr
-
-        try:
-            read_exr(p)
-        except ExrError as e:
-            raise PipelineError(f"--use {stage}: {p} does not open as EXR ({e}); fix: pass an OpenEXR "
-                                f"file (e.g. oiiotool IN -o OUT.exr)") from None
-    elif ext == ".ply":
-        from plyfile import PlyData
-
-        try:
-            with open(p, "rb") as f:
-                PlyData.read(f)
-        except Exception as e:  # plyfile raises several types for a broken file
-            raise PipelineError(f"--use {stage}: {p} does not open as PLY ({type(e).__name__}: {e}); fix: "
-                                f"pass a valid PLY file") from None
-
-
-# -- planning ------------------------------------------------------------------------------------
 def select(pipe: Pipeline, opts: Options, uses: dict[str, Path]) -> tuple[set[str], set[str], set[str]]:
     """(selected: may run, needed: must be available, forced) from --from/--until/--only/--force/--use."""
     for flag, name in (("--from", opts.from_stage), ("--until", opts.until), ("--only", opts.only),
@@ -442,8 +380,10 @@ class _Scheduler:
             if name in ctx.uses:
                 st.outputs[name] = import_use(ctx, name, ctx.uses[name])
                 st.ran.add(name)             # downstream of an import is not an early cutoff
-                self.resolved(st, name, {"how": "used", "source": str(ctx.uses[name]), "key": None},
-                              f" ({ctx.uses[name]})")
+                info = {"how": "used", "source": str(ctx.uses[name]), "key": None}
+                if name in ctx.imports:
+                    info["import"] = ctx.imports[name]
+                self.resolved(st, name, info, f" ({ctx.uses[name]})")
                 continue
             comp = ctx.components(name, st.outputs)
             key = cache_key(comp)

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .cachekey import cache_key, reasons
+from .uses import IMAGE_EXTS, import_cache
 
 if TYPE_CHECKING:
     from .runner import Context
@@ -39,6 +40,9 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
         if name in ctx.uses:
             out[name] = {"state": "fresh", "reasons": [f"used: {ctx.uses[name]}"], "key": None}
             outputs[name] = _digests_of(ctx.uses[name], s.primary)
+            if s.primary and s.primary.endswith(".exr") and ctx.uses[name].suffix.lower() in IMAGE_EXTS:
+                src_sha = outputs[name][s.primary]["digest"]
+                outputs[name] = import_cache(ctx, src_sha) or outputs[name]  # the converted EXR's digest
             continue
         if s.prompt and ctx.prompt is None:
             out[name] = {"state": "missing", "key": None,
@@ -62,6 +66,9 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
             missing = [rel for rel, e in rec["outputs"].items() if not store.check(e)]
             if not missing:
                 out[name] = {"state": "fresh", "reasons": [], "key": key, "ran": ran_info(rec)}
+                meta = rec.get("provenance", {}).get("meta", {}).get("engine")
+                if isinstance(meta, dict) and meta.get("why"):  # an engine the step chose itself (auto)
+                    out[name]["engine"] = {"ran": meta.get("engine"), "why": meta["why"]}
                 outputs[name] = rec["outputs"]
                 continue
             out[name] = {"state": "missing", "key": key,

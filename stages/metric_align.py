@@ -24,15 +24,16 @@ def main() -> int:
         disparity, pano, truth, job.engine, n_faces=int(p["faces"]), face_size=int(p["face_size"]),
         padding=float(p.get("padding", 0.3)), seed=job.seed, max_depth=float(p.get("max_depth", 3000.0)),
         huber=float(p.get("huber", 0.05)), model=str(p.get("model", "")), device=job.device,
-        progress=job.progress)
+        progress=job.progress, layout=pd.layout_params(p))
     write_exr(job.output("depth.exr"), {"Z": result.depth},
-              {"holoflow.stage": "metric_align", "holoflow.depth_kind": "radial", "holoflow.engine": job.engine,
+              {"holoflow.stage": "metric_align", "holoflow.depth_kind": "radial", "holoflow.engine": result.engine["engine"],
                "holoflow.simulation": int(bool(result.engine.get("simulation")))})
     report = {"engine": result.engine, "faces": result.faces, **result.fit}
     if truth is not None:
         report["truth_metrics"] = pd.score(result.depth, truth)
     job.output("metric_align.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
     job.meta(**report)
+    print(f"metric_align: engine {result.engine['engine']} ({result.engine['why']})", flush=True)
     return 0
 
 

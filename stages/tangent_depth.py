@@ -26,9 +26,10 @@ def main() -> int:
         pano, truth, job.engine, face_size=int(p["face_size"]), padding=float(p["padding"]),
         method=str(p.get("align", "grid")), grid=tuple(p["grid"]), smoothness=float(p["smoothness"]),
         scale_reg=float(p["scale_reg"]), blend_ramp=float(p["blend_ramp"]), seed=job.seed,
-        model=str(p.get("model", "")), device=job.device, progress=job.progress)
+        model=str(p.get("model", "")), device=job.device, progress=job.progress,
+        layout=pd.layout_params(p))
     attrs = {"holoflow.stage": "tangent_depth", "holoflow.depth_kind": "disparity",
-             "holoflow.engine": job.engine, "holoflow.simulation": int(bool(result.engine.get("simulation")))}
+             "holoflow.engine": result.engine["engine"], "holoflow.simulation": int(bool(result.engine.get("simulation")))}
     write_exr(job.output("disparity.exr"), {"Y": result.disparity}, attrs)
     for f in range(result.raw.shape[0]):
         write_exr(job.output(f"faces/face_{f:02d}.exr"),
@@ -44,6 +45,7 @@ def main() -> int:
     if truth is not None:
         meta["truth_oracle_affine"] = pd.oracle_metrics(result.disparity, truth)
     job.meta(**meta)
+    print(f"tangent_depth: engine {result.engine['engine']} ({result.engine['why']})", flush=True)
     return 0
 
 

@@ -17,6 +17,11 @@ Engines (docs/depth.md says what each is good for):
   per-face scale error and pixel noise (``SIM_METRIC``).
 ``prior`` (no weights, any panorama): a room layout from the ray direction alone (floor plane below
   the eye, ceiling above, a round wall around); no image content is used.
+``layout`` (no weights, any panorama): the image-driven estimator of holoflow.depth.layout (a room
+  layout indoors, ground / vertical / sky outdoors), computed once on the whole panorama and sampled
+  into the faces; its metric scale comes from the camera height.
+``auto``: ``simulated`` when the input carries a truth depth (procedural scenes), else ``layout``
+  (``resolve_engine`` says which and why).
 ``depth_anything`` / ``zoedepth``: the paper's networks through holoflow.engines (real weights).
 """
 from __future__ import annotations
@@ -28,8 +33,34 @@ import numpy as np
 #: progress callback: (done, total, what), as holoflow.stage.Job.progress and holoflow.engines take it
 Progress = Callable[[int, int, str], None] | None
 
-RELATIVE_ENGINES = ("simulated", "prior", "depth_anything")
-METRIC_ENGINES = ("simulated", "prior", "zoedepth")
+RELATIVE_ENGINES = ("auto", "simulated", "prior", "layout", "depth_anything")
+METRIC_ENGINES = ("auto", "simulated", "prior", "layout", "zoedepth")
+
+
+def resolve_engine(engine: str, has_truth: bool) -> tuple[str, str]:
+    """The engine that runs for ``engine`` (``auto`` -> ``simulated`` with a truth, else ``layout``) and
+    why, in one line for the step's output, report and status."""
+    if engine != "auto":
+        return engine, f"engine {engine!r} was chosen explicitly"
+    if has_truth:
+        return "simulated", "auto: the input carries a truth depth (Z), so the calibrated simulation runs"
+    return "layout", "auto: the input has no truth depth, so the image-driven layout estimator runs"
+
+
+def _layout_radial(pano, dirs: np.ndarray, layout: dict | None) -> tuple[np.ndarray, dict]:
+    """Radial depth [F, h, w] (metres, +inf sky) of the layout engine at the face directions, and its facts."""
+    import torch
+
+    from holoflow.depth.layout import LayoutConfig, estimate_layout_depth
+    from holoflow.geometry.sampling import sample_equirect
+
+    if pano is None:
+        raise ValueError("engine 'layout' needs the panorama image")
+    est = estimate_layout_depth(pano, LayoutConfig(**(layout or {})))
+    disp = np.where(np.isfinite(est.depth), 1.0 / np.maximum(est.depth, 1e-6), 0.0)  # [H, W], sky 0
+    d = sample_equirect(torch.from_numpy(disp[None].astype(np.float64)),
+                        torch.from_numpy(np.asarray(dirs, dtype=np.float64)), mode="nearest")[:, 0].numpy()
+    return np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.inf), est.facts
 
 #: simulated relative engine; sizes are fractions of the face side so any face size behaves alike
 SIM_RELATIVE = {
@@ -105,14 +136,22 @@ def layout_radial_depth(dirs: np.ndarray, layout: dict | None = None) -> np.ndar
 
 def relative_disparity(engine: str, images: np.ndarray, dirs: np.ndarray, cos: np.ndarray,
                        truth_radial: np.ndarray | None, seed: int, model: str = "", device: str = "cpu",
-                       progress: Progress = None) -> tuple[np.ndarray, dict]:
+                       progress: Progress = None, pano: np.ndarray | None = None,
+                       layout: dict | None = None) -> tuple[np.ndarray, dict]:
     """Relative perspective disparity [F, h, w] of the faces, and engine facts for the provenance.
 
     ``images`` [F, h, w, 3] *linear* RGB faces, passed to a real engine as they are (it encodes sRGB
     once itself: DESIGN.md, EXR colour is linear light); ``dirs`` [F, h, w, 3] world directions;
     ``cos`` [F, h, w]; ``truth_radial`` [F, h, w] true radial depth in the faces (``simulated`` only);
-    ``progress(done, total, what)``.
+    ``progress(done, total, what)``; ``pano`` [H, W, 3] linear RGB and ``layout`` (LayoutConfig fields)
+    for the ``layout`` engine.
     """
+    if engine == "layout":
+        radial, facts = _layout_radial(pano, dirs, layout)
+        _report(progress, len(cos))
+        z = radial * cos
+        return np.where(np.isfinite(z) & (z > 0), 1.0 / np.where(z > 0, z, 1.0), 0.0).astype(np.float32), {
+            "engine": "layout", "layout": facts, "note": "image-driven layout estimate (no weights)"}
     if engine == "simulated":
         if truth_radial is None:
             raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
@@ -135,10 +174,16 @@ def relative_disparity(engine: str, images: np.ndarray, dirs: np.ndarray, cos: n
 
 def metric_depth(engine: str, images: np.ndarray, dirs: np.ndarray, cos: np.ndarray,
                  truth_radial: np.ndarray | None, seed: int, model: str = "", device: str = "cpu",
-                 progress: Progress = None) -> tuple[np.ndarray, dict]:
+                 progress: Progress = None, pano: np.ndarray | None = None,
+                 layout: dict | None = None) -> tuple[np.ndarray, dict]:
     """Metric perspective depth z [F, h, w] in metres (+inf unbounded) of the faces, and engine facts.
 
     Arguments as for ``relative_disparity`` (``images`` linear RGB, encoded by the engine itself)."""
+    if engine == "layout":
+        radial, facts = _layout_radial(pano, dirs, layout)
+        _report(progress, len(cos))
+        return (radial * cos).astype(np.float32), {
+            "engine": "layout", "layout": facts, "note": "image-driven layout estimate (no weights)"}
     if engine == "simulated":
         if truth_radial is None:
             raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from holoflow.depth.align import Alignment, align_faces
-from holoflow.depth.engines import Progress, metric_depth, relative_disparity
+from holoflow.depth.engines import Progress, metric_depth, relative_disparity, resolve_engine
 from holoflow.depth.faces import face_rays, find_overlaps
 from holoflow.depth.metric import disparity_to_depth, robust_affine_fit
 from holoflow.depth.metrics import depth_metrics
@@ -84,20 +84,24 @@ def sample_radial(radial: np.ndarray, K, viewmat, size: int) -> np.ndarray:
 def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, face_size: int = 256,
                        padding: float = 1.0, method: str = "grid", grid=(8, 7), smoothness: float = 1.0,
                        scale_reg: float = 0.001, blend_ramp: float = 0.1, seed: int = 0, model: str = "",
-                       device: str = "cpu", progress: Progress = None) -> TangentDepth:
+                       device: str = "cpu", progress: Progress = None, layout: dict | None = None) -> TangentDepth:
     """Relative radial disparity [H, W] of a panorama [H, W, 3] (see the module docstring).
 
     ``truth`` [H, W] radial depth (needed by the ``simulated`` engine only); ``blend_ramp`` the frustum
     weights' ramp (fraction of the half-size, holoflow.geometry.icosahedron.frustum_weight);
-    ``progress(done, total, what)``.
+    ``progress(done, total, what)``; ``engine`` ``auto`` resolves by ``resolve_engine``; ``layout``
+    (LayoutConfig fields) configures the ``layout`` engine.
     """
     H, W = pano.shape[:2]
+    engine, why = resolve_engine(engine, truth is not None)
     faces = icosahedron_faces(face_size, padding)
     K, V = _np(faces.K), _np(faces.viewmat)
     images = sample_faces(pano, K, V, face_size).astype(np.float32)  # [F, h, w, 3]
     dirs, cos = face_rays(K, V, face_size, face_size)
     truth_faces = sample_radial(truth, K, V, face_size) if truth is not None else None
-    raw, meta = relative_disparity(engine, images, dirs, cos, truth_faces, seed, model, device, progress)
+    raw, meta = relative_disparity(engine, images, dirs, cos, truth_faces, seed, model, device, progress,
+                                   pano=pano, layout=layout)
+    meta = {**meta, "why": why}
     raw = np.asarray(raw, dtype=np.float64)
     if raw.shape != cos.shape:
         raise ValueError(f"depth engine {engine!r} returned {raw.shape}, expected {cos.shape}")
@@ -161,8 +165,10 @@ class MetricDepth:
 def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.ndarray | None, engine: str,
                           n_faces: int = 6, face_size: int = 256, padding: float = 0.3, seed: int = 0,
                           max_depth: float = 3000.0, huber: float = 0.05, model: str = "",
-                          device: str = "cpu", progress: Progress = None) -> MetricDepth:
-    """Metric radial depth from a relative disparity [H, W] and metric depth on a seeded face subset."""
+                          device: str = "cpu", progress: Progress = None, layout: dict | None = None) -> MetricDepth:
+    """Metric radial depth from a relative disparity [H, W] and metric depth on a seeded face subset
+    (``engine`` ``auto`` resolves by ``resolve_engine``; ``layout`` configures the ``layout`` engine)."""
+    engine, why = resolve_engine(engine, truth is not None)
     if not 1 <= n_faces <= 20:
         raise ValueError(f"metric_align faces must be in 1..20, got {n_faces}")
     if max_depth <= 0:
@@ -173,7 +179,9 @@ def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.nda
     images = sample_faces(pano, K, V, face_size).astype(np.float32)
     dirs, cos = face_rays(K, V, face_size, face_size)
     truth_faces = sample_radial(truth, K, V, face_size) if truth is not None else None
-    z, meta = metric_depth(engine, images, dirs, cos, truth_faces, [seed, 2], model, device, progress)
+    z, meta = metric_depth(engine, images, dirs, cos, truth_faces, [seed, 2], model, device, progress,
+                           pano=pano, layout=layout)
+    meta = {**meta, "why": why}
     z = np.asarray(z, dtype=np.float64)
     ref = np.where(np.isfinite(z) & (z > 0), cos / np.where(z > 0, z, 1.0), np.nan)  # radial disparity
     x = sample_faces(disparity, K, V, face_size)[..., 0]
@@ -183,6 +191,12 @@ def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.nda
                          "disparity does not grow with the reference disparity (wrong engine output?)")
     depth = disparity_to_depth(disparity, fit["scale"], fit["offset"], max_depth)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
+
+
+def layout_params(params: dict) -> dict:
+    """The ``layout`` engine's settings (holoflow.depth.layout.LayoutConfig fields) among a depth stage's
+    params: ``camera_height`` (metres) and ``scene`` (auto | indoor | outdoor)."""
+    return {k: params[k] for k in ("camera_height", "scene") if k in params}
 
 
 def oracle_metrics(disparity: np.ndarray, truth: np.ndarray, max_depth: float = 3000.0) -> dict:

@@ -104,11 +104,20 @@ def summary_table(run: RunInfo) -> str:
         origin = "this run" if origin == run.run_id else origin
         rows.append(
             f"<tr><td><a href='#{esc(s.name)}'>{esc(s.name)}</a></td><td>{badge(s.how)}</td>"
-            f"<td>{esc(r.get('engine', ''))}</td><td class=n>{bar}{fmt(r.get('wall_s', ''))}</td>"
+            f"<td>{esc(engine_ran(r))}</td><td class=n>{bar}{fmt(r.get('wall_s', ''))}</td>"
             f"<td class=n>{fmt(r.get('cpu_s', ''))}</td><td class=n>{fmt(r.get('peak_rss_mb', ''))}</td>"
             f"<td>{esc(origin)}</td><td><code>{esc((s.key or '')[:12])}</code></td>"
             f"<td class=n>{len(s.files)} files, {size:.2f} MiB</td></tr>")
     return f"<table>{head}{''.join(rows)}</table>"
+
+
+def engine_ran(r: dict) -> str:
+    """The engine a step's record names, and the one that actually ran when the stage resolved it
+    itself (``auto`` -> ``layout``: the step's ``@meta`` engine facts)."""
+    conf = str(r.get("engine", ""))
+    meta = r.get("meta", {}).get("engine") if isinstance(r.get("meta"), dict) else None
+    ran = meta.get("engine") if isinstance(meta, dict) else None
+    return f"{conf} -> {ran}" if ran and ran != conf else conf
 
 
 def stage_section(s: StageInfo, figs: list[Figure], notes: list[str], metrics: dict[str, Any]) -> str:
@@ -119,7 +128,9 @@ def stage_section(s: StageInfo, figs: list[Figure], notes: list[str], metrics: d
                    'or a failed step before it), so there is nothing to show.</p>')
         return "\n".join(out)
     r = s.record
-    facts = [f"engine <b>{esc(r.get('engine', '?'))}</b>", f"program <code>{esc(r.get('program', '?'))}</code>",
+    why = (r.get("meta", {}).get("engine") or {}) if isinstance(r.get("meta", {}).get("engine"), dict) else {}
+    facts = [f"engine <b>{esc(engine_ran(r) or '?')}</b>" + (f" ({esc(why['why'])})" if why.get("why") else ""),
+             f"program <code>{esc(r.get('program', '?'))}</code>",
              f"device {esc(r.get('device', '?'))}", f"seed {esc(r.get('seed', '?'))}",
              f"started {esc(r.get('started', '?'))}"]
     if r.get("host"):

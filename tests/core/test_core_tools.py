@@ -34,6 +34,11 @@ def test_use_rejects_non_exr_and_wrong_suffix(project, capsys):
     png = project.root / "pano.png"
     png.write_bytes(b"\x89PNG")
     rc, out, err = project.cli("run", "--pipeline", "images.yaml", "--use", f"img={png}", capsys=capsys)
+    # an image suffix is imported as a photo now (issue 20): a broken one is one clear line
+    assert rc == 2 and "OpenImageIO cannot read it" in err and len(err.strip().splitlines()) == 1
+    txt = project.root / "pano.txt"
+    txt.write_text("x")
+    rc, out, err = project.cli("run", "--pipeline", "images.yaml", "--use", f"img={txt}", capsys=capsys)
     assert rc == 2 and "main output is pano.exr" in err
 
 

@@ -1,0 +1,375 @@
+"""Image-driven panorama depth without weights: a room layout indoors, ground / vertical / sky outdoors.
+
+The ``layout`` depth engine (docs/depth-layout.md). From one equirect panorama (linear RGB [H, W, 3])
+it estimates a radial depth [H, W] in metres, +inf for sky:
+
+1. **Upright.** Line segments (OpenCV LSD) on perspective views become great circles on the sphere;
+   the vertical vanishing direction is the direction most of them pass through (RANSAC, then a least
+   squares refinement); the panorama is rotated so that it is world up (tilt corrected), and the
+   Manhattan yaw is the dominant horizontal vanishing direction (``vanishing.py``).
+2. **Indoor or outdoor** from the image (a blue / bright, textureless zenith cap with few segments is
+   sky); ``LayoutConfig.scene`` overrides it.
+3. **Lower boundary** per column: where the floor (ground) region that contains the nadir ends. A
+   dynamic programme over columns picks one boundary row per column from a colour model of the floor
+   (learnt from the rows around the nadir), image edges, Manhattan-horizontal line segments and a
+   smoothness term (``boundary_dp``).
+4. **Upper boundary** per column likewise: where the ceiling (indoors) or the sky (outdoors) that
+   contains the zenith ends.
+5. **Depth.** The floor is the plane ``camera_height`` below the eye: radial depth h / sin(-lat).
+   Whatever stands on the floor boundary is vertical, at horizontal distance d_f = h / tan(-lat_f).
+   Indoors the ceiling height is the robust ratio of the two boundaries over the columns where the same
+   wall meets both; the ceiling is the plane that far above the eye, and above the horizon a column is
+   the wall that meets the ceiling (d_c), below it the object on the floor (d_f). Outdoors the sky is
+   +inf and the vertical structures rise from d_f up to the sky boundary.
+
+Metric scale comes from ``camera_height`` alone (1.6 m default, a standing adult's eye / a tripod).
+Everything is computed on a ``work_width`` copy (fast: about a second at 512 x 256) and evaluated
+analytically at the output size.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class LayoutConfig:
+    """Parameters of the layout engine (units in each docstring)."""
+
+    camera_height: float = 1.6
+    """metres from the eye down to the floor / ground; sets the metric scale of everything."""
+    scene: str = "auto"
+    """auto | indoor | outdoor: room layout, or ground / vertical / sky; auto decides from the image."""
+    work_width: int = 512
+    """the panorama is analysed at this width (height width / 2), pixels."""
+    upright: bool = True
+    """estimate the camera's tilt from vertical line segments and correct it."""
+    min_tilt_deg: float = 1.0
+    """degrees: a smaller estimated tilt is left alone (resampling costs more than it corrects)."""
+    max_tilt_deg: float = 30.0
+    """a vertical vanishing direction further than this from the image's up is not trusted (degrees)."""
+    min_depth: float = 0.4
+    """metres: no vertical surface is placed nearer than this (horizontal distance)."""
+    max_depth_indoor: float = 40.0
+    """metres: the farthest horizontal distance of a wall indoors."""
+    max_depth_outdoor: float = 300.0
+    """metres: the farthest horizontal distance of a vertical structure outdoors."""
+    smoothness: float = 6.0
+    """DP cost per row of boundary change between neighbouring columns (data costs are per row too)."""
+    jump: float = 30.0
+    """rows: boundary changes beyond this cost no more (occlusion edges are allowed)."""
+    edge_weight: float = 8.0
+    """weight of the edge evidence at the boundary row against the region (colour) costs."""
+    states: int = 96
+    """number of wall distances (log-spaced, min_depth..max_depth) the per-column DP chooses from."""
+    ceiling_weight: float = 0.5
+    """weight of the ceiling evidence against the floor evidence in the joint DP."""
+    distance_prior: float = 3.0
+    """weight of the log-normal prior (sigma 0.7 in log metres) on the wall distance around typical_distance."""
+    typical_distance: float = 3.0
+    """metres: the most likely horizontal distance of a wall (indoors) or facade (outdoors)."""
+    prob_mix: float = 0.0
+    """region probability = global colour model ^ (1 - mix) x per-column colour model ^ mix."""
+
+
+@dataclass
+class LayoutDepth:
+    """``depth`` [H, W] radial metres (+inf sky) in the input panorama's frame; ``facts`` (JSON-able):
+    scene, why, tilt, ceiling height, boundaries summary."""
+
+    depth: np.ndarray
+    facts: dict = field(default_factory=dict)
+
+
+# -- small helpers -------------------------------------------------------------------------------
+def _latitudes(H: int) -> np.ndarray:
+    """Latitude (radians) of each row's centre [H] (docs/conventions.md)."""
+    return np.pi / 2 - np.pi * (np.arange(H) + 0.5) / H
+
+
+def _lab(srgb8: np.ndarray) -> np.ndarray:
+    """8-bit sRGB [H, W, 3] -> float Lab [H, W, 3] (L 0..100)."""
+    import cv2
+
+    return cv2.cvtColor(srgb8.astype(np.float32) / 255.0, cv2.COLOR_RGB2Lab)
+
+
+def _wrap_blur(img: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian blur of [H, W(, C)] wrapping across the seam (reflecting at the poles)."""
+    import scipy.ndimage as ndi
+
+    if sigma <= 0:
+        return img
+    s = (sigma, sigma) + (0,) * (img.ndim - 2)
+    mode = ("reflect", "wrap") + ("nearest",) * (img.ndim - 2)
+    return ndi.gaussian_filter(img, s, mode=mode)
+
+
+# -- the boundary dynamic programme --------------------------------------------------------------
+def boundary_dp(cost: np.ndarray, smoothness: float, jump: float) -> np.ndarray:
+    """Minimum-cost path through a cost volume [K, W] (state k per column) -> states [W].
+
+    Transition cost between neighbouring columns: ``smoothness`` * min(|k - k'|, ``jump``). Columns
+    wrap (the seam is handled by solving over the panorama extended by a quarter turn on both sides
+    and keeping the middle).
+    """
+    K, W = cost.shape
+    pad = min(W, max(1, W // 4))
+    ext = np.concatenate([cost[:, -pad:], cost, cost[:, :pad]], axis=1)  # [K, W + 2 pad]
+    k = np.arange(K)
+    trans = smoothness * np.minimum(np.abs(k[:, None] - k[None, :]), jump)  # [K, K] from k' to k
+    n = ext.shape[1]
+    acc = ext[:, 0].copy()
+    back = np.zeros((n, K), dtype=np.int32)
+    for c in range(1, n):
+        tot = acc[None, :] + trans  # [k, k']
+        back[c] = np.argmin(tot, axis=1)
+        acc = tot[k, back[c]] + ext[:, c]
+    path = np.empty(n, dtype=np.int64)
+    path[-1] = int(np.argmin(acc))
+    for c in range(n - 1, 0, -1):
+        path[c - 1] = back[c, path[c]]
+    return path[pad:pad + W]
+
+
+def region_probability(lab: np.ndarray, seed: np.ndarray, other: np.ndarray, bins: int = 12) -> np.ndarray:
+    """P(region | colour) [H, W] in [0, 1] from Lab histograms of ``seed`` and ``other`` pixel masks
+    [H, W] (colour histograms with add-one smoothing, equal priors)."""
+    lo = np.array([0.0, -60.0, -60.0])
+    hi = np.array([100.0, 60.0, 60.0])
+    q = np.clip(((lab - lo) / (hi - lo) * bins).astype(np.int64), 0, bins - 1)
+    idx = (q[..., 0] * bins + q[..., 1]) * bins + q[..., 2]  # [H, W]
+    hs = np.bincount(idx[seed], minlength=bins ** 3).astype(np.float64) + 0.5
+    ho = np.bincount(idx[other], minlength=bins ** 3).astype(np.float64) + 0.5
+    hs /= hs.sum()
+    ho /= ho.sum()
+    p = hs / (hs + ho)
+    return p[idx]
+
+
+def local_probability(lab: np.ndarray, seed: np.ndarray, spread: float = 12.0) -> np.ndarray:
+    """P(same surface as the seed rows of this column) [H, W]: colour distance (Lab) to the seed's
+    per-column median colour (smoothed over ``spread`` columns), scaled by the seed's own spread."""
+    import scipy.ndimage as ndi
+
+    H, W = seed.shape
+    ref = np.zeros((W, 3))
+    for c in range(W):
+        col = lab[seed[:, c], c]
+        ref[c] = np.median(col, axis=0) if len(col) else lab[:, c].mean(0)
+    ref = ndi.gaussian_filter1d(ref, spread, axis=0, mode="wrap")  # [W, 3]
+    w = np.array([0.5, 1.0, 1.0])  # lightness varies with shading more than chroma does
+    dist = np.sqrt((((lab - ref[None]) * w) ** 2).sum(-1))  # [H, W]
+    tau = 2.0 * float(np.median(dist[seed])) + 2.0
+    return np.exp(-0.5 * (dist / tau) ** 2)
+
+
+def row_costs(prob: np.ndarray, edges: np.ndarray, edge_weight: float) -> np.ndarray:
+    """Cost [H, W] of 'the region (rows >= b) starts at row b', for every row b and column.
+
+    Sum over rows >= b (up to the bottom) of non-region-ness, plus the sum over rows < b of
+    region-ness, minus ``edge_weight`` x the edge evidence between rows b-1 and b."""
+    H, W = prob.shape
+    below = np.cumsum((1.0 - prob)[::-1], axis=0)[::-1]
+    above = np.concatenate([np.zeros((1, W)), np.cumsum(prob, axis=0)[:-1]], axis=0)
+    return below + above - edge_weight * edges
+
+
+def _edges(lab: np.ndarray) -> np.ndarray:
+    """Vertical colour change between row r-1 and r, [H, W], normalised to ~[0, 1] (95th pct = 1)."""
+    d = np.zeros(lab.shape[:2])
+    diff = lab[1:] - lab[:-1]
+    w = np.array([1.0, 1.5, 1.5])  # chroma counts a little more than lightness (shading)
+    d[1:] = np.sqrt(((diff * w) ** 2).sum(-1))
+    scale = np.percentile(d, 95) + 1e-6
+    return np.minimum(d / scale, 1.5)
+
+
+def lower_boundary(prob: np.ndarray, edges: np.ndarray, lat: np.ndarray, cfg: LayoutConfig,
+                   lat_range=(-np.radians(70), -np.radians(1.0)), extra: np.ndarray | None = None) -> np.ndarray:
+    """Row index [W] (first floor row, top-down) of the floor region's upper edge per column.
+
+    ``prob`` [H, W] floor probability, ``edges`` [H, W] boundary evidence between rows r-1 and r,
+    ``lat`` [H] row latitudes. States are the rows with latitude in ``lat_range``.
+    """
+    H, W = prob.shape
+    rows = np.nonzero((lat >= lat_range[0]) & (lat <= lat_range[1]))[0]
+    top, bot = rows[0], rows[-1]
+    r = np.arange(top, bot + 1)
+    pf = prob[top:bot + 1]  # [K, W]
+    nf = 1.0 - pf
+    # cost(b) = sum_{rows >= b} (non-floor) + sum_{rows < b, in range} floor-ness - edge(b)
+    below = np.cumsum(nf[::-1], axis=0)[::-1]  # [K, W]: rows b..bot
+    above = np.concatenate([np.zeros((1, W)), np.cumsum(pf, axis=0)[:-1]], axis=0)  # rows top..b-1
+    ev = edges[top:bot + 1] + (extra[top:bot + 1] if extra is not None else 0.0)
+    cost = below + above - cfg.edge_weight * ev
+    k = boundary_dp(cost, cfg.smoothness * 10, cfg.jump)
+    return r[k]
+
+
+def upper_boundary(prob: np.ndarray, edges: np.ndarray, lat: np.ndarray, cfg: LayoutConfig,
+                   lat_range=(np.radians(1.0), np.radians(70)), extra: np.ndarray | None = None) -> np.ndarray:
+    """Row index [W] of the first non-ceiling (non-sky) row below the zenith region, per column."""
+    H = prob.shape[0]
+    flip = lambda a: a[::-1]  # noqa: E731 - mirror rows so the upper problem is the lower one
+    fe2 = np.zeros_like(edges)
+    fe2[1:] = flip(edges)[:-1]
+    ex = None
+    if extra is not None:
+        ex = np.zeros_like(extra)
+        ex[1:] = flip(extra)[:-1]
+    b = lower_boundary(flip(prob), fe2, -flip(lat), cfg, (-lat_range[1], -lat_range[0]), ex)
+    return H - b  # mirrored first-region row b -> first non-region row from the top is H - b
+
+
+# -- depth of the layout -------------------------------------------------------------------------
+def compose_depth(H: int, W: int, lat_floor: np.ndarray, lat_top: np.ndarray, h: float, ceiling: float | None,
+                  cfg: LayoutConfig) -> np.ndarray:
+    """Radial depth [H, W] (metres, +inf sky) from per-column boundary latitudes [W] (radians).
+
+    ``lat_floor`` floor boundary (< 0), ``lat_top`` ceiling / sky boundary (> 0); ``h`` camera height;
+    ``ceiling`` height of the ceiling above the eye (metres) or None outdoors (sky above ``lat_top``).
+    """
+    lat = _latitudes(H)[:, None]  # [H, 1]
+    s, c = np.sin(lat), np.cos(lat)
+    dmax = cfg.max_depth_indoor if ceiling is not None else cfg.max_depth_outdoor
+    d_f = np.clip(h / np.tan(np.maximum(-lat_floor, 1e-4)), cfg.min_depth, dmax)[None, :]  # [1, W]
+    floor = np.where(s < 0, h / np.maximum(-s, 1e-9), np.inf)
+    if ceiling is None:
+        vert = d_f / np.maximum(c, 1e-6)
+        depth = np.where(lat < lat_floor[None, :], floor, vert)
+        return np.where(lat >= lat_top[None, :], np.inf, depth)
+    d_c = np.clip(ceiling / np.tan(np.maximum(lat_top, 1e-4)), cfg.min_depth, dmax)[None, :]
+    d_c = np.maximum(d_c, d_f)  # the wall behind an object is not nearer than the object
+    ceil = np.where(s > 0, ceiling / np.maximum(s, 1e-9), np.inf)
+    vert = np.where(lat > 0, d_c, d_f) / np.maximum(c, 1e-6)
+    depth = np.where(lat < lat_floor[None, :], floor, vert)
+    return np.where(lat >= lat_top[None, :], ceil, depth)
+
+
+def estimate_layout_depth(pano: np.ndarray, cfg: LayoutConfig | None = None,
+                          out_shape: tuple[int, int] | None = None) -> LayoutDepth:
+    """Radial depth [H, W] (metres, +inf sky) of a linear RGB panorama [H, W, 3] (module docstring)."""
+    from holoflow.imageops.color import linear_to_uint8
+
+    cfg = cfg or LayoutConfig()
+    if cfg.camera_height <= 0:
+        raise ValueError(f"layout: camera_height must be > 0 metres, got {cfg.camera_height}")
+    if cfg.scene not in ("auto", "indoor", "outdoor"):
+        raise ValueError(f"layout: scene must be auto, indoor or outdoor, got {cfg.scene!r}")
+    pano = np.nan_to_num(np.asarray(pano, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    H0, W0 = out_shape or pano.shape[:2]
+    Wk = max(16, min(int(cfg.work_width), pano.shape[1]))
+    Wk -= Wk % 2
+    Hk = Wk // 2
+    from holoflow.depth.panorama import resize_pano
+
+    work = resize_pano(pano, Wk)
+    # exposure-normalise so a dark or HDR (> 1) panorama is analysed like a well-exposed one
+    med = float(np.median(work.mean(-1)))
+    work = work * (0.18 / med) if med > 1e-6 else work
+    srgb = linear_to_uint8(np.clip(work, 0.0, 1.0))
+    facts: dict = {"config": asdict(cfg), "work_size": [Wk, Hk]}
+    R = None
+    if cfg.upright:
+        from holoflow.depth.vanishing import rotate_equirect, rotation_to_upright, segment_normals, vertical_direction
+
+        v, facts["upright"] = vertical_direction(*segment_normals(srgb), cfg.max_tilt_deg)
+        if v is not None and facts["upright"]["tilt_deg"] > cfg.min_tilt_deg:
+            R = rotation_to_upright(v)
+            srgb = np.clip(rotate_equirect(srgb.astype(np.float64), R) + 0.5, 0, 255).astype(np.uint8)
+    est = _estimate(work, srgb, cfg, facts, H0, W0)
+    if R is not None:  # back to the input's frame: depth(d) = upright depth(R d), via disparity (sky 0)
+        disp = np.where(np.isfinite(est.depth), 1.0 / np.maximum(est.depth, 1e-9), 0.0)
+        disp = rotate_equirect(disp, R.T, mode="nearest")
+        est.depth = np.where(disp > 0, 1.0 / np.where(disp > 0, disp, 1.0), np.inf).astype(np.float32)
+    return est
+
+
+def _estimate(work, srgb, cfg, facts, H0, W0):
+    Hk, Wk = srgb.shape[:2]
+    lab = _wrap_blur(_lab(srgb), 1.0)
+    lat = _latitudes(Hk)
+    L = lat[:, None] * np.ones((1, Wk))
+    edges = _edges(lab)
+    scene, why = (cfg.scene, "set by the scene parameter") if cfg.scene != "auto" else classify_scene(lab, lat)
+    facts.update(scene=scene, scene_why=why)
+    seed_f = (L < -np.radians(50)) & (L > -np.radians(85))
+    other_f = (L > -np.radians(8)) & (L < np.radians(35))
+    seed_c = (L > np.radians(50)) & (L < np.radians(85))
+    other_c = (L < np.radians(8)) & (L > -np.radians(35))
+    pf = _wrap_blur(_combine(region_probability(lab, seed_f, other_f), local_probability(lab, seed_f), cfg), 1.0)
+    pc = _wrap_blur(_combine(region_probability(lab, seed_c, other_c), local_probability(lab, seed_c), cfg), 1.0)
+    h = float(cfg.camera_height)
+    cost_f = row_costs(pf, edges, cfg.edge_weight)  # [Hk, Wk] floor starts at row b
+    # ceiling: mirrored rows; cost_c[b] = 'the ceiling ends above row b' (rows < b are ceiling)
+    ef = np.zeros_like(edges)
+    ef[1:] = edges[::-1][:-1]
+    cost_c = row_costs(pc[::-1], ef, cfg.edge_weight)  # [Hk, Wk] mirrored: ceiling ends at row H - b
+    dist = np.exp(np.linspace(np.log(cfg.min_depth), np.log(cfg.max_depth_indoor if scene == "indoor"
+                                                              else cfg.max_depth_outdoor), cfg.states))
+    row_f = np.clip(np.round((np.pi / 2 + np.arctan(h / dist)) / np.pi * Hk).astype(np.int64), 0, Hk - 1)
+    # typical rooms: a weak log-normal prior on the wall distance (per column, in row-cost units)
+    prior = cfg.distance_prior * (np.log(dist / cfg.typical_distance) / 0.7) ** 2
+    data_f = cost_f[row_f] + prior[:, None]  # [K, Wk]
+    best = None
+    heights = [None] if scene != "indoor" else list(h * np.exp(np.linspace(np.log(0.3), np.log(2.5), 15)))
+    for ceiling in heights:
+        if ceiling is None:
+            data = data_f
+        else:
+            # the ceiling's last row is above row b = first wall row; mirrored index H - b
+            row_c = np.clip(np.round((np.pi / 2 - np.arctan(ceiling / dist)) / np.pi * Hk).astype(np.int64), 1, Hk - 1)
+            data = data_f + cfg.ceiling_weight * cost_c[Hk - row_c]
+        k = boundary_dp(data, cfg.smoothness, cfg.jump)
+        total = float(data[k, np.arange(Wk)].sum())
+        if best is None or total < best[0]:
+            best = (total, ceiling, k)
+    _, ceiling, k = best
+    d = dist[k]  # [Wk] horizontal wall distance per column, metres
+    lat_f = -np.arctan(h / d)
+    if ceiling is not None:
+        lat_c = np.arctan(ceiling / d)
+    else:  # outdoors: the sky region around the zenith, its own boundary per column
+        lat_c = np.pi / 2 - np.pi * upper_boundary(pc, edges, lat, cfg) / Hk
+        lat_c = np.maximum(lat_c, lat_f + np.pi / Hk)  # the sky starts above the ground
+    if ceiling is not None:
+        facts["ceiling_above_eye_m"] = round(float(ceiling), 3)
+    cols = (np.arange(W0) + 0.5) * Wk / W0 - 0.5
+    lat_f0 = _interp_wrap(lat_f, cols)
+    lat_c0 = _interp_wrap(lat_c, cols)
+    depth = compose_depth(H0, W0, lat_f0, lat_c0, h, ceiling, cfg)
+    d_f = d
+    facts["floor_distance_m"] = {"median": round(float(np.median(d_f)), 3),
+                                 "p10": round(float(np.percentile(d_f, 10)), 3),
+                                 "p90": round(float(np.percentile(d_f, 90)), 3)}
+    return LayoutDepth(depth.astype(np.float32), facts)
+
+
+def _combine(p_global: np.ndarray, p_local: np.ndarray, cfg: LayoutConfig) -> np.ndarray:
+    """Geometric mix of the two region probabilities (``LayoutConfig.prob_mix``)."""
+    m = float(cfg.prob_mix)
+    return np.power(np.maximum(p_global, 1e-6), 1 - m) * np.power(np.maximum(p_local, 1e-6), m)
+
+
+def _interp_wrap(values: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Linear interpolation of per-column values [W] at fractional columns x, wrapping at the seam."""
+    W = values.shape[0]
+    x0 = np.floor(x).astype(np.int64)
+    t = x - x0
+    return values[x0 % W] * (1 - t) + values[(x0 + 1) % W] * t
+
+
+def classify_scene(lab: np.ndarray, lat: np.ndarray) -> tuple[str, str]:
+    """indoor | outdoor from the zenith cap (lat > 45 deg) of a Lab panorama, and why (one line).
+
+    Sky: bright, bluish or grey-white, smooth. A cap where most pixels are sky-like is outdoors.
+    """
+    cap = lab[lat > np.radians(45)]
+    Lc, bc = cap[..., 0], cap[..., 2]
+    sky = (Lc >= np.median(lab[..., 0])) & (bc < -5)  # blue and not darker than the typical pixel; overcast skies are not recognised (docs)
+    frac = float(sky.mean()) if sky.size else 0.0
+    if frac > 0.5:
+        return "outdoor", f"{frac:.0%} of the zenith cap is bright blue sky (> 50%)"
+    return "indoor", f"{frac:.0%} of the zenith cap looks like sky (needs > 50%)"

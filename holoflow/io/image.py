@@ -1,0 +1,95 @@
+"""A user's own panorama file -> linear RGB equirect (what ``--use base_pano=FILE`` imports).
+
+Reads JPG, PNG (8 / 16 bit), TIFF, HDR and EXR through OpenImageIO. Integer files (8 / 16 bit) are
+sRGB-encoded and decoded to linear light; float files (HDR, EXR, float TIFF) are linear already and
+kept as they are (values > 1 allowed). An equirect panorama is 2:1; anything else is refused with one
+line giving the size. XMP GPano metadata (Google's photo-sphere tags) is honoured: a cropped panorama
+(``GPano:CroppedAreaImageWidthPixels`` < ``GPano:FullPanoWidthPixels``) is placed at its
+``CroppedAreaLeftPixels`` / ``CroppedAreaTopPixels`` into the full equirect canvas (black elsewhere).
+"""
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+#: extensions that import as images (EXR is read by holoflow.io.exr when it is a holoflow file)
+IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".hdr", ".exr")
+_GPANO = ("FullPanoWidthPixels", "FullPanoHeightPixels", "CroppedAreaImageWidthPixels",
+          "CroppedAreaImageHeightPixels", "CroppedAreaLeftPixels", "CroppedAreaTopPixels")
+
+
+class ImageImportError(ValueError):
+    """A file that cannot be used as an equirect panorama: one line, with the fix."""
+
+
+def read_panorama_image(path: str | Path) -> tuple[np.ndarray, dict]:
+    """Linear RGB [H, W, 3] float32 of an equirect panorama file, and its import facts (file name,
+    sha256, size, pixel format, colour handling, GPano placement). Raises ImageImportError."""
+    import OpenImageIO as oiio
+
+    path = Path(path)
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise ImageImportError(f"{path.name}: OpenImageIO cannot read it ({oiio.geterror().strip()}); "
+                               "fix: pass a JPG, PNG, TIFF, HDR or EXR panorama")
+    try:
+        spec = inp.spec()
+        fmt = str(spec.format)
+        pixels = inp.read_image(0, 0, 0, min(spec.nchannels, 4), "float")
+    finally:
+        inp.close()
+    if pixels is None or spec.width < 1 or spec.height < 1:
+        raise ImageImportError(f"{path.name}: no pixels could be read; fix: check the file")
+    img = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, -1)
+    rgb = img[..., :3] if img.shape[2] >= 3 else np.repeat(img[..., :1], 3, axis=2)
+    integer = fmt.startswith("uint") or fmt.startswith("int")
+    colour = "linear (float file, kept)"
+    if integer:
+        from holoflow.imageops.color import srgb_to_linear
+
+        rgb = srgb_to_linear(rgb)
+        colour = f"sRGB {fmt} decoded to linear"
+    rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+    facts = {"file": path.name, "sha256": _sha256(path), "size": [spec.width, spec.height],
+             "format": fmt, "colour": colour}
+    gpano = {k: spec.getattribute(f"GPano:{k}") for k in _GPANO}
+    if all(gpano.get(k) is not None for k in _GPANO[:4]):
+        rgb, placed = place_cropped(rgb, {k: int(v) for k, v in gpano.items() if v is not None})
+        facts["gpano"] = placed
+    H, W = rgb.shape[:2]
+    if W != 2 * H:
+        raise ImageImportError(f"{path.name} is {W}x{H}, not a 2:1 equirect panorama; fix: pass a full "
+                               f"360x180 equirect image (e.g. {2 * H}x{H}) or one with GPano crop metadata")
+    return rgb, facts
+
+
+def place_cropped(rgb: np.ndarray, gpano: dict) -> tuple[np.ndarray, dict]:
+    """Place a cropped panorama [h, w, 3] into its full canvas (GPano pixel fields) -> [H, W, 3], facts.
+
+    The crop's own size may differ from the tagged one (a resized file): everything is scaled by the
+    ratio of the actual width to ``CroppedAreaImageWidthPixels``. Columns wrap at the seam."""
+    h, w = rgb.shape[:2]
+    full_w, full_h = gpano["FullPanoWidthPixels"], gpano["FullPanoHeightPixels"]
+    cw, ch = gpano["CroppedAreaImageWidthPixels"], gpano["CroppedAreaImageHeightPixels"]
+    if (cw, ch) == (full_w, full_h):
+        return rgb, {"cropped": False}
+    s = w / max(cw, 1)
+    FW, FH = int(round(full_w * s)), int(round(full_h * s))
+    left, top = int(round(gpano.get("CroppedAreaLeftPixels", 0) * s)), int(round(gpano.get("CroppedAreaTopPixels", 0) * s))
+    out = np.zeros((FH, FW, 3), np.float32)
+    rows = np.arange(h) + top
+    keep = (rows >= 0) & (rows < FH)
+    cols = (np.arange(w) + left) % FW
+    out[np.ix_(rows[keep], cols)] = rgb[keep]
+    return out, {"cropped": True, "full": [FW, FH], "left": left, "top": top, "crop": [w, h],
+                 "note": "placed into the full equirect canvas from XMP GPano; uncovered pixels are black"}
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
