@@ -82,7 +82,7 @@ def read_manifest(folder: Path) -> dict[str, Path]:
     except json.JSONDecodeError as e:
         raise ValueError(f"--models {folder}: {MANIFEST} is not JSON ({e.msg}, line {e.lineno})") from None
     roles = doc.get("roles") if isinstance(doc, dict) else None
-    if doc.get("format") != 1 or not isinstance(roles, dict):
+    if not isinstance(roles, dict) or doc.get("format") != 1:
         raise ValueError(f"--models {folder}: {MANIFEST} needs {{\"format\": 1, \"roles\": {{ROLE: PATH}}}}")
     from .engines.weights import DEFAULTS
 
