@@ -6,7 +6,7 @@ Every engine works on F tangent faces of h x w pixels and returns float arrays [
   monocular network does; NaN / inf / negative values are allowed and masked downstream.
 - metric engines return perspective depth z in metres (+inf where unbounded).
 
-Engines (docs/depth.md says what each is good for):
+Engines (registered by name in holoflow/depth/config.py; docs/depth.md says what each is good for):
 
 ``simulated`` (SIMULATION, needs the truth): the truth disparity of each face, degraded like a
   relative-depth network: edge mixing (Gaussian blur of the disparity, which only changes it across
@@ -27,9 +27,6 @@ import numpy as np
 
 #: progress callback: (done, total, what), as holoflow.stage.Job.progress and holoflow.engines take it
 Progress = Callable[[int, int, str], None] | None
-
-RELATIVE_ENGINES = ("simulated", "prior", "depth_anything")
-METRIC_ENGINES = ("simulated", "prior", "zoedepth")
 
 #: simulated relative engine; sizes are fractions of the face side so any face size behaves alike
 SIM_RELATIVE = {
@@ -103,60 +100,72 @@ def layout_radial_depth(dirs: np.ndarray, layout: dict | None = None) -> np.ndar
     return np.minimum(np.minimum(t_wall, t_floor), t_ceil)
 
 
-def relative_disparity(engine: str, images: np.ndarray, dirs: np.ndarray, cos: np.ndarray,
-                       truth_radial: np.ndarray | None, seed: int, model: str = "", device: str = "cpu",
-                       progress: Progress = None) -> tuple[np.ndarray, dict]:
-    """Relative perspective disparity [F, h, w] of the faces, and engine facts for the provenance.
-
-    ``images`` [F, h, w, 3] *linear* RGB faces, passed to a real engine as they are (it encodes sRGB
-    once itself: DESIGN.md, EXR colour is linear light); ``dirs`` [F, h, w, 3] world directions;
-    ``cos`` [F, h, w]; ``truth_radial`` [F, h, w] true radial depth in the faces (``simulated`` only);
-    ``progress(done, total, what)``.
-    """
-    if engine == "simulated":
-        if truth_radial is None:
-            raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
-                             "panorama); use engine 'prior' or 'depth_anything' for a panorama without one")
-        out = simulated_relative(truth_radial, cos, seed)
-        _report(progress, len(out))
-        return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_RELATIVE),
-                     "note": "SIMULATED relative depth from the scene truth, not a network"}
-    if engine == "prior":
-        _report(progress, len(cos))
-        return (1.0 / (layout_radial_depth(dirs) * cos)).astype(np.float32), {
-            "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
-    if engine == "depth_anything":
-        from holoflow.engines import depth_anything
-
-        out = depth_anything.relative_disparity(images, model, device, progress)
-        return np.asarray(out, dtype=np.float32), {"engine": "depth_anything", "model": model}
-    raise ValueError(f"unknown relative depth engine {engine!r}; choose one of {RELATIVE_ENGINES}")
+# Engines at the signature of their stage (holoflow/depth/config.py registers them by name):
+# engine(images, dirs, cos, truth_radial, seed, cfg, device, progress) -> (array [F, h, w], facts)
+# ``images`` [F, h, w, 3] *linear* RGB faces, passed to a real engine as they are (it encodes sRGB once
+# itself: DESIGN.md, EXR colour is linear light); ``dirs`` [F, h, w, 3] world directions; ``cos``
+# [F, h, w]; ``truth_radial`` [F, h, w] true radial depth in the faces (``simulated`` only); ``cfg`` the
+# stage's params (an engine's own params are fields there); ``progress(done, total, what)``.
+# Relative engines return perspective disparity, metric engines perspective depth z (m, +inf unbounded).
 
 
-def metric_depth(engine: str, images: np.ndarray, dirs: np.ndarray, cos: np.ndarray,
-                 truth_radial: np.ndarray | None, seed: int, model: str = "", device: str = "cpu",
-                 progress: Progress = None) -> tuple[np.ndarray, dict]:
-    """Metric perspective depth z [F, h, w] in metres (+inf unbounded) of the faces, and engine facts.
+def simulated_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                              progress: Progress = None) -> tuple[np.ndarray, dict]:
+    """``simulated`` relative engine (SIMULATION from the truth, ``SIM_RELATIVE``)."""
+    out = simulated_relative(_need_truth(truth_radial, "depth_anything"), cos, seed)
+    _report(progress, len(out))
+    return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_RELATIVE),
+                 "note": "SIMULATED relative depth from the scene truth, not a network"}
 
-    Arguments as for ``relative_disparity`` (``images`` linear RGB, encoded by the engine itself)."""
-    if engine == "simulated":
-        if truth_radial is None:
-            raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
-                             "panorama); use engine 'prior' or 'zoedepth' for a panorama without one")
-        out = simulated_metric(truth_radial, cos, seed)
-        _report(progress, len(out))
-        return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_METRIC),
-                     "note": "SIMULATED metric depth from the scene truth, not a network"}
-    if engine == "prior":
-        _report(progress, len(cos))
-        return (layout_radial_depth(dirs) * cos).astype(np.float32), {
-            "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
-    if engine == "zoedepth":
-        from holoflow.engines import zoedepth
 
-        out = zoedepth.metric_depth(images, model, device, progress)
-        return np.asarray(out, dtype=np.float32), {"engine": "zoedepth", "model": model}
-    raise ValueError(f"unknown metric depth engine {engine!r}; choose one of {METRIC_ENGINES}")
+def prior_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                          progress: Progress = None) -> tuple[np.ndarray, dict]:
+    """``prior`` relative engine: the disparity of the room layout prior (no image content)."""
+    _report(progress, len(cos))
+    return (1.0 / (layout_radial_depth(dirs) * cos)).astype(np.float32), {
+        "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
+
+
+def depth_anything_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                          progress: Progress = None) -> tuple[np.ndarray, dict]:
+    """``depth_anything`` relative engine (holoflow.engines.depth_anything; weights: ``cfg.model``)."""
+    from holoflow.engines import depth_anything
+
+    out = depth_anything.relative_disparity(images, cfg.model, device, progress)
+    return np.asarray(out, dtype=np.float32), {"engine": "depth_anything", "model": cfg.model}
+
+
+def simulated_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                            progress: Progress = None) -> tuple[np.ndarray, dict]:
+    """``simulated`` metric engine (SIMULATION from the truth, ``SIM_METRIC``)."""
+    out = simulated_metric(_need_truth(truth_radial, "zoedepth"), cos, seed)
+    _report(progress, len(out))
+    return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_METRIC),
+                 "note": "SIMULATED metric depth from the scene truth, not a network"}
+
+
+def prior_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                        progress: Progress = None) -> tuple[np.ndarray, dict]:
+    """``prior`` metric engine: the z of the room layout prior (no image content)."""
+    _report(progress, len(cos))
+    return (layout_radial_depth(dirs) * cos).astype(np.float32), {
+        "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
+
+
+def zoedepth_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                    progress: Progress = None) -> tuple[np.ndarray, dict]:
+    """``zoedepth`` metric engine (holoflow.engines.zoedepth; weights: ``cfg.model``)."""
+    from holoflow.engines import zoedepth
+
+    out = zoedepth.metric_depth(images, cfg.model, device, progress)
+    return np.asarray(out, dtype=np.float32), {"engine": "zoedepth", "model": cfg.model}
+
+
+def _need_truth(truth_radial: np.ndarray | None, network: str) -> np.ndarray:
+    if truth_radial is None:
+        raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
+                         f"panorama); use engine 'prior' or '{network}' for a panorama without one")
+    return truth_radial
 
 
 def _report(progress: Progress, n: int) -> None:
