@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-DISPATCH = {"eval": "holoflow.eval", "report": "holoflow.report"}
+DISPATCH = {"eval": "holoflow.eval", "report": "holoflow.report", "params": "holoflow.paramdocs"}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -148,6 +148,7 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("bench", help="holoflow bench NAME [ARGS]: run holoflow.bench.NAME (e.g. cache)")
     sub.add_parser("eval", help="holoflow eval ...: accuracy against procedural ground truth")
     sub.add_parser("report", help="holoflow report ...: a run's report")
+    sub.add_parser("params", help="holoflow params [STAGE] [--markdown]: each stage's params (type, default, range)")
     return p
 
 

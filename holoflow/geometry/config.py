@@ -11,7 +11,8 @@ from holoflow.params import Engines, StageParams, param
 class PointCloudParams(StageParams):
     """Equirect RGB-D -> P0, P_f, P_s (holoflow/geometry/pointcloud.py)."""
 
-    ENGINES = Engines("the stage's own code (stages/point_cloud.py)", default="holoflow.geometry.pointcloud:equirect_to_points")
+    ENGINES = Engines("one engine, the method: equirect_to_points(rgb [H, W, 3], radial depth [H, W]) per cloud",
+                      default="holoflow.geometry.pointcloud:equirect_to_points")
 
     p0_width: int = param(1024, "P0 at depth resolution", "px", ge=2)
     pf_width: int = param(512, "P_f: downsampled, then depth-gradient filtered", "px", ge=2)
@@ -26,7 +27,8 @@ class PointCloudParams(StageParams):
 class PanoSetParams(StageParams):
     """The panorama seen by the base cameras (holoflow/geometry/rigs.py)."""
 
-    ENGINES = Engines("the stage's own code (stages/pano_set.py)", default="holoflow.geometry.sampling:equirect_to_pinhole")
+    ENGINES = Engines("one engine, the method: equirect_to_pinhole(pano [3, H, W], K, viewmats, size, size)",
+                      default="holoflow.geometry.sampling:equirect_to_pinhole")
 
     rig: str = param("fibonacci", "base camera layout: poles + golden-angle spiral (holoflow/geometry/rigs.py)",
                      choices=("fibonacci",))
@@ -40,7 +42,8 @@ class PanoSetParams(StageParams):
 class PcdSetParams(StageParams):
     """P_s seen by the supplementary cameras through a z-buffer (holoflow/geometry/pcdset.py)."""
 
-    ENGINES = Engines("the stage's own code (stages/pcd_set.py)", default="holoflow.geometry.pcdset:pcd_set_views")
+    ENGINES = Engines("one engine, the method: pcd_set(points, linear, K, base viewmats, width, height, cfg)",
+                      default="holoflow.geometry.pcdset:pcd_set")
 
     offset: float = param(0.1, "supplementary camera offset", "fraction of the base view's median depth", ge=0)
     angle_deg: float = param(10.0, "supplementary cameras turn back towards the base view's axis by this",
