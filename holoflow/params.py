@@ -16,7 +16,6 @@ the pipeline's validation and ``holoflow params`` never load torch.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import functools
 import importlib
 import math
@@ -151,6 +150,8 @@ def _hints(cls: type) -> dict[str, Any]:
 
 
 def suggest(word: str, choices) -> str:
+    import difflib
+
     close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1)
     return f" (did you mean '{close[0]}'?)" if close else ""
 
