@@ -17,7 +17,9 @@ Schema (docs/cli.md has the user-facing version)::
         inputs: {pano: upscale}   # optional; input name -> upstream stage
         code: [holoflow/imageops] # optional; files/folders whose source is part of the cache key
         primary: pano.exr         # optional; name a single `--use` file takes in the stage's outputs
-        params: {strength: 0.5}   # optional; defaults, their types are checked on override
+        config: holoflow.imageops.config:DetailParams   # optional; the stage's typed parameter class
+        params: {strength: 0.5}   # optional; with `config:` overrides of the class's defaults, checked
+                                  # by the class; without, the defaults (their types checked on override)
         resources: {cpus: 1, gpus: 0, memory_gb: 2}   # optional; what one step needs (scheduling)
     profiles:
       NAME: {device: auto, STAGE: {engine: X, PARAM: VALUE, resources: {gpus: 1}}}
@@ -36,7 +38,8 @@ from typing import Any
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _TOP_KEYS = {"version", "seed", "default_profile", "stages", "profiles"}
-_STAGE_KEYS = {"run", "engine", "engines", "prompt", "inputs", "code", "primary", "params", "resources"}
+_STAGE_KEYS = {"run", "engine", "engines", "prompt", "inputs", "code", "primary", "config", "params",
+               "resources"}
 _RESOURCE_KEYS = {"cpus": int, "gpus": int, "memory_gb": float}
 DEVICES = ("cpu", "cuda", "auto")
 SUPPORTED_VERSIONS = (1,)
@@ -76,9 +79,10 @@ class Stage:
     prompt: bool
     inputs: dict[str, str]         # input name -> upstream stage
     code: tuple[str, ...]          # paths relative to the pipeline's folder
-    params: dict[str, Any]
+    params: dict[str, Any]         # every param's default (the class's, with `params:` applied)
     primary: str | None = None
     resources: Resources = Resources()
+    config: Any = None             # the StageParams class named by `config:` (holoflow/params.py), or None
 
 
 @dataclass
@@ -282,12 +286,46 @@ def _stage(path: Path, name: Any, block: Any) -> Stage:
         if not isinstance(p, str) or not _NAME.match(p) or p == "engine":
             raise _err(path, name, f"invalid param name {p!r}",
                        "use letters, digits and _; `engine` is reserved")
+    config = _config_class(path, name, block.get("config"))
+    if config is not None:
+        for e in engines:
+            if e not in config.ENGINES.names:
+                raise _err(path, name, f"engine '{e}' is not registered for {config.__name__}",
+                           f"use one of: {', '.join(config.ENGINES.names)}{_suggest(e, config.ENGINES.names)}")
+        params = {**config.defaults(), **{k: _param_checked(path, name, config, k, v, "`params:`")
+                                          for k, v in params.items()}}
     primary = block.get("primary")
     if primary is not None and (not isinstance(primary, str) or not primary or "/" in primary):
         raise _err(path, name, f"`primary:` is {primary!r}", "name one output file, e.g. `primary: pano.exr`")
     resources = _resources(path, name, block.get("resources"), Resources(), "`resources:`")
     return Stage(name, run, engine, tuple(engines), prompt, dict(inputs), tuple(code), dict(params), primary,
-                 resources)
+                 resources, config)
+
+
+def _config_class(path: Path, stage: str, spec: Any):
+    """The StageParams class of ``config: module:Class`` (None when the key is absent)."""
+    if spec is None:
+        return None
+    from .params import load_class
+
+    if not isinstance(spec, str) or ":" not in spec:
+        raise _err(path, stage, f"`config:` is {spec!r}", "write `config: package.module:ClassName`")
+    try:
+        return load_class(spec)
+    except (ImportError, AttributeError) as e:
+        raise _err(path, stage, f"`config: {spec}` cannot be loaded ({e})",
+                   "name a StageParams class, e.g. holoflow.recon.config:PreOptParams") from None
+
+
+def _param_checked(path: Path, stage: str, config, key: str, value: Any, origin: str) -> Any:
+    """``value`` checked by the stage's param class (type, range, known name), canonical type."""
+    from .params import ParamError
+
+    try:
+        value = config.check(key, value)
+    except ParamError as e:
+        raise _err(path, stage, f"{origin} sets {e.msg}", e.fix) from None
+    return list(value) if isinstance(value, tuple) else value      # the plain form hashed into the key
 
 
 def _resources(path: Path, stage: str, raw: Any, base: Resources, origin: str) -> Resources:
@@ -406,6 +444,8 @@ def _check_override(path: Path, stage: Stage, key: str, value: Any, origin: str)
             raise _err(path, stage.name, f"{origin} sets engine '{value}', not one of {list(stage.engines)}",
                        f"pick one of {', '.join(stage.engines)}{_suggest(str(value), stage.engines)}")
         return value
+    if stage.config is not None:
+        return _param_checked(path, stage.name, stage.config, key, value, origin)
     if key not in stage.params:
         raise _err(path, stage.name, f"{origin} sets unknown param '{key}'",
                    f"params are: {', '.join(stage.params) or '(none)'}{_suggest(key, stage.params)}")
@@ -474,7 +514,8 @@ def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[
         except yaml.YAMLError:
             value = text
         # A bare word that YAML reads as a non-string stays a string when the param is a string.
-        if isinstance(out[sname].stage.params.get(key), str) and not isinstance(value, str):
+        if key in out[sname].stage.params and isinstance(out[sname].stage.params[key], str) \
+                and not isinstance(value, str):
             value = text
         _apply(out[sname], key, _check_override(pipe.path, out[sname].stage, key, value, "--set"), "--set")
     return out

@@ -417,7 +417,7 @@ class _Scheduler:
         spec = {"stage": name, "engine": r.engine, "params": r.params, "seed": ctx.seed,
                 "prompt": ctx.prompt or "", "device": ctx.device,
                 "inputs": {inp: str(ctx.store.run_dir(st.run_id) / up) for inp, up in stage.inputs.items()},
-                "key": key, "run": st.run_id}
+                "key": key, "run": st.run_id, "cpus": r.resources.cpus}
         prov = {"run": st.run_id, "engine": r.engine, "params": r.params, "seed": ctx.seed, "device": ctx.device,
                 "inputs": {inp: {"stage": up, "outputs": {k: v["digest"] for k, v in st.outputs[up].items()}}
                            for inp, up in stage.inputs.items()},

@@ -10,11 +10,16 @@ This module imports nothing heavy, so a stage pays only for what it uses.
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, NoReturn
+from typing import Any, Callable, NoReturn, TypeVar
+
+from .executors import THREAD_VARS
+
+P = TypeVar("P")
 
 
 @dataclass
@@ -30,13 +35,14 @@ class Job:
     output_dir: Path
     work_dir: Path
     device: str = "cpu"
+    cpus: int = 1                  # the stage's resources.cpus, capped at this host's cores: its thread count
     extra: dict[str, Any] = field(default_factory=dict)
     _last_progress: float = field(default=0.0, repr=False)
 
     @classmethod
     def load(cls, path: str | Path) -> "Job":
         spec = json.loads(Path(path).read_text())
-        return cls(
+        job = cls(
             stage=spec["stage"],
             engine=spec["engine"],
             params=dict(spec.get("params", {})),
@@ -46,8 +52,23 @@ class Job:
             output_dir=Path(spec["output_dir"]),
             work_dir=Path(spec.get("work_dir", spec["output_dir"])),
             device=spec.get("device", "cpu"),
+            cpus=max(1, min(int(spec.get("cpus", 1)), os.cpu_count() or 1)),
             extra={k: v for k, v in spec.items() if k not in _KNOWN},
         )
+        job.apply_threads()
+        return job
+
+    def apply_threads(self) -> None:
+        """Every thread pool of this process (OpenMP, MKL, OpenBLAS, numba, torch) uses ``cpus`` threads:
+        set once here for every stage, before (or, for torch, also after) the libraries load."""
+        for var in THREAD_VARS:
+            os.environ[var] = str(self.cpus)
+        if "torch" in sys.modules:
+            sys.modules["torch"].set_num_threads(self.cpus)
+
+    def config(self, cls: type[P]) -> P:
+        """The step's params as the stage's typed class (holoflow/params.py), every value checked."""
+        return cls.from_params(self.params)
 
     @classmethod
     def from_argv(cls, argv: list[str] | None = None) -> "Job":
@@ -73,13 +94,6 @@ class Job:
             raise SystemExit(f"{self.stage}: input '{name}' has no file '{filename}' "
                              f"(has: {sorted(p.name for p in self.input(name).iterdir())})")
         return path
-
-    def image_size(self) -> tuple[int, int]:
-        """(width, height) in pixels from the ``width`` / ``height`` params; ValueError below 1."""
-        width, height = int(self.params["width"]), int(self.params["height"])
-        if width < 1 or height < 1:
-            raise ValueError(f"width and height must be >= 1, got {width}x{height}")
-        return width, height
 
     def output(self, filename: str) -> Path:
         """Path for an output file (subfolders allowed); its parent is created."""
@@ -134,4 +148,4 @@ def emit(kind: str, payload: dict[str, Any]) -> None:
     sys.stdout.flush()
 
 
-_KNOWN = {"stage", "engine", "params", "seed", "prompt", "inputs", "output_dir", "work_dir", "device"}
+_KNOWN = {"stage", "engine", "params", "seed", "prompt", "inputs", "output_dir", "work_dir", "device", "cpus"}

@@ -13,18 +13,15 @@ def main() -> int:
 
     job = Job.from_argv()
     from holoflow.depth import panorama as pd
+    from holoflow.depth.config import MetricAlignParams
     from holoflow.depth.io import read_disparity, read_pano, read_truth
     from holoflow.io.exr import write_exr
 
-    p = job.params
+    cfg = job.config(MetricAlignParams)
     disparity = read_disparity(job.input_file("disparity", "disparity.exr"))
     pano = pd.resize_pano(read_pano(job.input_file("pano", "pano.exr")), disparity.shape[1])
     truth = read_truth(job.inputs.get("truth"))
-    result = pd.metric_from_disparity(
-        disparity, pano, truth, job.engine, n_faces=int(p["faces"]), face_size=int(p["face_size"]),
-        padding=float(p.get("padding", 0.3)), seed=job.seed, max_depth=float(p.get("max_depth", 3000.0)),
-        huber=float(p.get("huber", 0.05)), model=str(p.get("model", "")), device=job.device,
-        progress=job.progress, layout=pd.layout_params(p))
+    result = pd.metric_from_disparity(disparity, pano, truth, job.engine, cfg, job.seed, job.device, job.progress)
     write_exr(job.output("depth.exr"), {"Z": result.depth},
               {"holoflow.stage": "metric_align", "holoflow.depth_kind": "radial", "holoflow.engine": result.engine["engine"],
                "holoflow.simulation": int(bool(result.engine.get("simulation")))})

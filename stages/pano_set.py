@@ -9,8 +9,6 @@ the rig leaves part of the sphere unseen.
 """
 from __future__ import annotations
 
-import os
-
 from holoflow.stage import Job, run_main
 
 
@@ -18,22 +16,19 @@ def main() -> int:
     job = Job.from_argv()
     import torch
 
-    torch.set_num_threads(max(1, (os.cpu_count() or 2) // 2))  # spinning workers cost more than they bring on shared cores
-
     from holoflow.geometry.camera import intrinsics_from_fov
+    from holoflow.geometry.config import PanoSetParams
     from holoflow.geometry.export import cameras_json, write_cameras, write_transforms
     from holoflow.geometry.rigs import base_rig, rig_coverage
     from holoflow.geometry.sampling import equirect_to_pinhole
     from holoflow.io.exr import read_rgb, write_rgb
 
-    p = job.params
-    count, size, fov = int(p["cameras"]), int(p["size"]), float(p["fov_deg"])
-    if size < 1 or not 0 < fov < 180:
-        raise ValueError(f"need size >= 1 and 0 < fov_deg < 180, got size={size}, fov_deg={fov}")
+    cfg = job.config(PanoSetParams)
+    count, size, fov = cfg.cameras, cfg.size, cfg.fov_deg
     device = torch.device(job.device)
     pano = torch.from_numpy(read_rgb(job.input_file("pano", "pano.exr"))).to(device).permute(2, 0, 1)  # [3, H, W]
     K = intrinsics_from_fov(fov, size, size, device=device, dtype=torch.float32)
-    viewmats = base_rig(count, str(p["rig"]), device=device, dtype=torch.float32)  # [M, 4, 4]
+    viewmats = base_rig(count, cfg.rig, device=device, dtype=torch.float32)  # [M, 4, 4]
     names = [f"{i:03d}" for i in range(count)]
     files = [f"views/{n}.exr" for n in names]
     chunk = 16  # views per call: the panorama is prefiltered once per call

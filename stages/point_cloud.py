@@ -10,8 +10,6 @@ antialiased, depth point-sampled (no invented edge depths). PLY colours are 8-bi
 """
 from __future__ import annotations
 
-import os
-
 from holoflow.stage import Job, run_main
 
 
@@ -20,18 +18,15 @@ def main() -> int:
     import kornia
     import torch
 
-    torch.set_num_threads(max(1, (os.cpu_count() or 2) // 2))  # spinning workers cost more than they bring on shared cores
-
+    from holoflow.geometry.config import PointCloudParams
     from holoflow.geometry.pointcloud import (depth_gradient_mask, equirect_to_points, far_shell_radius,
                                               resample_rgbd, sky_to_shell)
     from holoflow.io.exr import read_exr, read_rgb
     from holoflow.io.ply import write_points
 
-    p = job.params
-    widths = {name: int(p[f"{name}_width"]) for name in ("p0", "pf", "ps")}
-    if min(widths.values()) < 2:
-        raise ValueError(f"point cloud widths must be >= 2, got {widths}")
-    threshold, sky_radius = float(p["grad_threshold"]), float(p["sky_radius"])
+    cfg = job.config(PointCloudParams)
+    widths = {"p0": cfg.p0_width, "pf": cfg.pf_width, "ps": cfg.ps_width}
+    threshold, sky_radius = cfg.grad_threshold, cfg.sky_radius
     rgb = torch.from_numpy(read_rgb(job.input_file("pano", "pano.exr")))  # [H, W, 3] linear
     channels, attrs = read_exr(job.input_file("depth", "depth.exr"))
     if "Z" not in channels:

@@ -8,17 +8,15 @@ def main() -> int:
 
     job = Job.from_argv()
     from holoflow.io.ply import read_points
+    from holoflow.recon.config import PreOptParams
     from holoflow.recon.schedule import pre_optimize, save_result
     from holoflow.recon.views import load_view_set
 
-    p = job.params
-    for key in ("pcd_iters", "pano_iters"):
-        if int(p[key]) < 0:
-            raise ValueError(f"{key} must be >= 0, got {p[key]}")
+    cfg = job.config(PreOptParams)
     xyz, rgb = read_points(job.input_file("cloud", "pf.ply"))
     pcd_views, _ = load_view_set(job.input("pcd"), alpha_is_mask=True)
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
-    model, log = pre_optimize(xyz, rgb, pcd_views, pano_views, p, job.engine, job.seed,
+    model, log = pre_optimize(xyz, rgb, pcd_views, pano_views, cfg, job.engine, job.seed,
                               progress=lambda d, n: job.progress(d, n, "iters"), device=job.device)
     save_result(job, model, log, pano_views, "gaussians.ply")     # G0, its fit and train_log.json
     return 0

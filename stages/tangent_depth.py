@@ -1,5 +1,5 @@
 """tangent_depth: the panorama (downsampled to ``width``) -> 20 padded icosahedron tangent faces ->
-relative disparity per face (engine) -> per-face alignment (``align``: median | affine | grid) ->
+relative disparity per face (engine, holoflow.depth.config.TangentDepthParams.ENGINES) -> per-face alignment (``align``: median | affine | grid) ->
 frustum blending. Writes disparity.exr (Y = relative radial disparity), faces/face_NN.exr (raw.Y =
 engine output, aligned.Y = aligned radial disparity) and alignment.json (residuals, node grids).
 With a truth depth (Z in the truth panorama) it records how well the disparity can score after the
@@ -16,18 +16,14 @@ def main() -> int:
     import numpy as np
 
     from holoflow.depth import panorama as pd
+    from holoflow.depth.config import TangentDepthParams
     from holoflow.depth.io import read_pano, read_truth
     from holoflow.io.exr import write_exr
 
-    p = job.params
-    pano = pd.resize_pano(read_pano(job.input_file("pano", "pano.exr")), int(p["width"]))
+    cfg = job.config(TangentDepthParams)
+    pano = pd.resize_pano(read_pano(job.input_file("pano", "pano.exr")), cfg.width)
     truth = read_truth(job.inputs.get("truth"))
-    result = pd.estimate_disparity(
-        pano, truth, job.engine, face_size=int(p["face_size"]), padding=float(p["padding"]),
-        method=str(p.get("align", "grid")), grid=tuple(p["grid"]), smoothness=float(p["smoothness"]),
-        scale_reg=float(p["scale_reg"]), blend_ramp=float(p["blend_ramp"]), seed=job.seed,
-        model=str(p.get("model", "")), device=job.device, progress=job.progress,
-        layout=pd.layout_params(p))
+    result = pd.estimate_disparity(pano, truth, job.engine, cfg, job.seed, job.device, job.progress)
     attrs = {"holoflow.stage": "tangent_depth", "holoflow.depth_kind": "disparity",
              "holoflow.engine": result.engine["engine"], "holoflow.simulation": int(bool(result.engine.get("simulation")))}
     write_exr(job.output("disparity.exr"), {"Y": result.disparity}, attrs)

@@ -9,21 +9,19 @@ def main() -> int:
 
     job = Job.from_argv()
     from holoflow.io.ply import read_points
+    from holoflow.recon.config import TransferOptParams
     from holoflow.recon.preview import write_previews
     from holoflow.recon.schedule import save_result, transfer_optimize
     from holoflow.recon.views import load_view_set
 
-    p = job.params
-    if int(p["iters"]) < 0:
-        raise ValueError(f"iters must be >= 0, got {p['iters']}")
+    cfg = job.config(TransferOptParams)
     xyz, rgb = read_points(job.input_file("cloud", "pf.ply"))
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
-    inp_views, _ = load_view_set(job.input("inp"), alpha_is_mask=False) if p.get("use_inp", True) else ([], None)
-    model, log = transfer_optimize(xyz, rgb, pano_views, inp_views, p, job.engine, job.seed,
+    inp_views, _ = load_view_set(job.input("inp"), alpha_is_mask=False) if cfg.use_inp else ([], None)
+    model, log = transfer_optimize(xyz, rgb, pano_views, inp_views, cfg, job.engine, job.seed,
                                    progress=lambda d, n: job.progress(d, n, "iters"), device=job.device)
     save_result(job, model, log, pano_views, "scene.ply")         # G1, its fit and train_log.json
-    write_previews(model, job.output_dir / "previews", pano_views[0]["K"], job.engine,
-                   size=int(p.get("preview_size", 128)))
+    write_previews(model, job.output_dir / "previews", pano_views[0]["K"], job.engine, size=cfg.preview_size)
     return 0
 
 

@@ -34,15 +34,16 @@ def render(prompt: str, width: int, seed: int) -> tuple[np.ndarray, np.ndarray, 
 
 
 def run_once(rgb, truth, method, face_size, grid, seed, n_faces=6):
-    """One tangent_depth + metric_align pass (other settings: estimate_disparity's defaults, which are
-    pipeline.yaml's); returns (metrics, oracle metrics, seconds)."""
+    """One tangent_depth + metric_align pass (other settings: the stages' param classes' defaults);
+    returns (metrics, oracle metrics, seconds)."""
     from holoflow.depth import panorama as pd
+    from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 
     t0 = time.perf_counter()
-    td = pd.estimate_disparity(rgb, truth, "simulated", face_size=face_size, method=method, grid=grid,
-                               seed=seed)
-    md = pd.metric_from_disparity(td.disparity, rgb, truth, "simulated", n_faces=n_faces,
-                                  face_size=face_size, seed=seed)
+    td = pd.estimate_disparity(rgb, truth, "simulated", TangentDepthParams(face_size=face_size, align=method,
+                                                                           grid=grid), seed)
+    md = pd.metric_from_disparity(td.disparity, rgb, truth, "simulated",
+                                  MetricAlignParams(faces=n_faces, face_size=face_size), seed)
     seconds = time.perf_counter() - t0
     return pd.score(md.depth, truth), pd.oracle_metrics(td.disparity, truth), seconds
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from holoflow.depth.config import TangentDepthParams
 from holoflow.depth.faces import Overlaps
 
 METHODS = ("median", "affine", "grid")
@@ -50,13 +51,14 @@ class Alignment:
 
 
 def align_faces(disp: np.ndarray, valid: np.ndarray, cos: np.ndarray, overlaps: Overlaps,
-                method: str = "grid", grid: tuple[int, int] = (8, 7), smoothness: float = 1.0,
-                scale_reg: float = 0.1, robust_iters: int = 3) -> Alignment:
+                cfg: TangentDepthParams, robust_iters: int = 3) -> Alignment:
     """Align per-face perspective disparities ``disp`` [F, h, w] into radial disparities.
 
     ``valid`` [F, h, w] marks usable pixels (finite engine output; NaN / inf are masked here too);
-    ``cos`` [F, h, w] face obliquity; ``grid`` = (cols, rows) nodes per face for ``grid``.
+    ``cos`` [F, h, w] face obliquity; from ``cfg``: ``align`` (the method), ``grid`` = (cols, rows)
+    nodes per face for ``grid``, ``smoothness`` and ``scale_reg`` (docs/depth.md).
     """
+    method, grid, smoothness, scale_reg = cfg.align, cfg.grid, cfg.smoothness, cfg.scale_reg
     if method not in METHODS:
         raise ValueError(f"unknown alignment method {method!r}; choose one of {METHODS}")
     disp = np.asarray(disp, dtype=np.float64)

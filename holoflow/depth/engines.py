@@ -6,7 +6,7 @@ Every engine works on F tangent faces of h x w pixels and returns float arrays [
   monocular network does; NaN / inf / negative values are allowed and masked downstream.
 - metric engines return perspective depth z in metres (+inf where unbounded).
 
-Engines (docs/depth.md says what each is good for):
+Engines (registered by name in holoflow/depth/config.py; docs/depth.md says what each is good for):
 
 ``simulated`` (SIMULATION, needs the truth): the truth disparity of each face, degraded like a
   relative-depth network: edge mixing (Gaussian blur of the disparity, which only changes it across
@@ -19,10 +19,10 @@ Engines (docs/depth.md says what each is good for):
   the eye, ceiling above, a round wall around); no image content is used.
 ``layout`` (no weights, any panorama): the image-driven estimator of holoflow.depth.layout (a room
   layout indoors, ground / vertical / sky outdoors), computed once on the whole panorama and sampled
-  into the faces; its metric scale comes from the camera height.
-``auto``: ``simulated`` when the input carries a truth depth (procedural scenes), else ``layout``
-  (``resolve_engine`` says which and why).
+  into the faces; its metric scale comes from the camera height (``cfg.camera_height``).
 ``depth_anything`` / ``zoedepth``: the paper's networks through holoflow.engines (real weights).
+``auto`` (the default): ``simulated`` when the input carries a truth depth (procedural scenes), else
+  ``layout``; ``resolve_engine`` says which and why.
 """
 from __future__ import annotations
 
@@ -32,35 +32,6 @@ import numpy as np
 
 #: progress callback: (done, total, what), as holoflow.stage.Job.progress and holoflow.engines take it
 Progress = Callable[[int, int, str], None] | None
-
-RELATIVE_ENGINES = ("auto", "simulated", "prior", "layout", "depth_anything")
-METRIC_ENGINES = ("auto", "simulated", "prior", "layout", "zoedepth")
-
-
-def resolve_engine(engine: str, has_truth: bool) -> tuple[str, str]:
-    """The engine that runs for ``engine`` (``auto`` -> ``simulated`` with a truth, else ``layout``) and
-    why, in one line for the step's output, report and status."""
-    if engine != "auto":
-        return engine, f"engine {engine!r} was chosen explicitly"
-    if has_truth:
-        return "simulated", "auto: the input carries a truth depth (Z), so the calibrated simulation runs"
-    return "layout", "auto: the input has no truth depth, so the image-driven layout estimator runs"
-
-
-def _layout_radial(pano, dirs: np.ndarray, layout: dict | None) -> tuple[np.ndarray, dict]:
-    """Radial depth [F, h, w] (metres, +inf sky) of the layout engine at the face directions, and its facts."""
-    import torch
-
-    from holoflow.depth.layout import LayoutConfig, estimate_layout_depth
-    from holoflow.geometry.sampling import sample_equirect
-
-    if pano is None:
-        raise ValueError("engine 'layout' needs the panorama image")
-    est = estimate_layout_depth(pano, LayoutConfig(**(layout or {})))
-    disp = np.where(np.isfinite(est.depth), 1.0 / np.maximum(est.depth, 1e-6), 0.0)  # [H, W], sky 0
-    d = sample_equirect(torch.from_numpy(disp[None].astype(np.float64)),
-                        torch.from_numpy(np.asarray(dirs, dtype=np.float64)), mode="nearest")[:, 0].numpy()
-    return np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.inf), est.facts
 
 #: simulated relative engine; sizes are fractions of the face side so any face size behaves alike
 SIM_RELATIVE = {
@@ -76,6 +47,16 @@ SIM_METRIC = {"scale_std": 0.04, "noise_std": 0.02}
 
 #: layout prior: floor this far below the eye, ceiling above it, a round wall at this radius (metres)
 PRIOR_LAYOUT = {"floor": 1.6, "ceiling": 1.4, "wall": 4.0}
+
+
+def resolve_engine(engine: str, has_truth: bool) -> tuple[str, str]:
+    """The engine that runs for ``engine`` (``auto`` -> ``simulated`` with a truth, else ``layout``) and
+    why, in one line for the step's output, report and status."""
+    if engine != "auto":
+        return engine, f"engine {engine!r} was chosen explicitly"
+    if has_truth:
+        return "simulated", "auto: the input carries a truth depth (Z), so the calibrated simulation runs"
+    return "layout", "auto: the input has no truth depth, so the image-driven layout estimator runs"
 
 
 def simulated_relative(radial: np.ndarray, cos: np.ndarray, seed: int,
@@ -134,74 +115,109 @@ def layout_radial_depth(dirs: np.ndarray, layout: dict | None = None) -> np.ndar
     return np.minimum(np.minimum(t_wall, t_floor), t_ceil)
 
 
-def relative_disparity(engine: str, images: np.ndarray, dirs: np.ndarray, cos: np.ndarray,
-                       truth_radial: np.ndarray | None, seed: int, model: str = "", device: str = "cpu",
-                       progress: Progress = None, pano: np.ndarray | None = None,
-                       layout: dict | None = None) -> tuple[np.ndarray, dict]:
-    """Relative perspective disparity [F, h, w] of the faces, and engine facts for the provenance.
-
-    ``images`` [F, h, w, 3] *linear* RGB faces, passed to a real engine as they are (it encodes sRGB
-    once itself: DESIGN.md, EXR colour is linear light); ``dirs`` [F, h, w, 3] world directions;
-    ``cos`` [F, h, w]; ``truth_radial`` [F, h, w] true radial depth in the faces (``simulated`` only);
-    ``progress(done, total, what)``; ``pano`` [H, W, 3] linear RGB and ``layout`` (LayoutConfig fields)
-    for the ``layout`` engine.
-    """
-    if engine == "layout":
-        radial, facts = _layout_radial(pano, dirs, layout)
-        _report(progress, len(cos))
-        z = radial * cos
-        return np.where(np.isfinite(z) & (z > 0), 1.0 / np.where(z > 0, z, 1.0), 0.0).astype(np.float32), {
-            "engine": "layout", "layout": facts, "note": "image-driven layout estimate (no weights)"}
-    if engine == "simulated":
-        if truth_radial is None:
-            raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
-                             "panorama); use engine 'prior' or 'depth_anything' for a panorama without one")
-        out = simulated_relative(truth_radial, cos, seed)
-        _report(progress, len(out))
-        return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_RELATIVE),
-                     "note": "SIMULATED relative depth from the scene truth, not a network"}
-    if engine == "prior":
-        _report(progress, len(cos))
-        return (1.0 / (layout_radial_depth(dirs) * cos)).astype(np.float32), {
-            "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
-    if engine == "depth_anything":
-        from holoflow.engines import depth_anything
-
-        out = depth_anything.relative_disparity(images, model, device, progress)
-        return np.asarray(out, dtype=np.float32), {"engine": "depth_anything", "model": model}
-    raise ValueError(f"unknown relative depth engine {engine!r}; choose one of {RELATIVE_ENGINES}")
+# Engines at the signature of their stage (holoflow/depth/config.py registers them by name):
+# engine(images, dirs, cos, truth_radial, seed, cfg, device, progress, pano) -> (array [F, h, w], facts)
+# ``images`` [F, h, w, 3] *linear* RGB faces, passed to a real engine as they are (it encodes sRGB once
+# itself: DESIGN.md, EXR colour is linear light); ``dirs`` [F, h, w, 3] world directions; ``cos``
+# [F, h, w]; ``truth_radial`` [F, h, w] true radial depth in the faces (``simulated`` only); ``cfg`` the
+# stage's params (an engine's own params are fields there); ``progress(done, total, what)``; ``pano``
+# [H, W, 3] the whole linear panorama the faces come from (for engines that look at it whole).
+# Relative engines return perspective disparity, metric engines perspective depth z (m, +inf unbounded).
 
 
-def metric_depth(engine: str, images: np.ndarray, dirs: np.ndarray, cos: np.ndarray,
-                 truth_radial: np.ndarray | None, seed: int, model: str = "", device: str = "cpu",
-                 progress: Progress = None, pano: np.ndarray | None = None,
-                 layout: dict | None = None) -> tuple[np.ndarray, dict]:
-    """Metric perspective depth z [F, h, w] in metres (+inf unbounded) of the faces, and engine facts.
+def simulated_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                              progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``simulated`` relative engine (SIMULATION from the truth, ``SIM_RELATIVE``)."""
+    out = simulated_relative(_need_truth(truth_radial, "depth_anything"), cos, seed)
+    _report(progress, len(out))
+    return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_RELATIVE),
+                 "note": "SIMULATED relative depth from the scene truth, not a network"}
 
-    Arguments as for ``relative_disparity`` (``images`` linear RGB, encoded by the engine itself)."""
-    if engine == "layout":
-        radial, facts = _layout_radial(pano, dirs, layout)
-        _report(progress, len(cos))
-        return (radial * cos).astype(np.float32), {
-            "engine": "layout", "layout": facts, "note": "image-driven layout estimate (no weights)"}
-    if engine == "simulated":
-        if truth_radial is None:
-            raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
-                             "panorama); use engine 'prior' or 'zoedepth' for a panorama without one")
-        out = simulated_metric(truth_radial, cos, seed)
-        _report(progress, len(out))
-        return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_METRIC),
-                     "note": "SIMULATED metric depth from the scene truth, not a network"}
-    if engine == "prior":
-        _report(progress, len(cos))
-        return (layout_radial_depth(dirs) * cos).astype(np.float32), {
-            "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
-    if engine == "zoedepth":
-        from holoflow.engines import zoedepth
 
-        out = zoedepth.metric_depth(images, model, device, progress)
-        return np.asarray(out, dtype=np.float32), {"engine": "zoedepth", "model": model}
-    raise ValueError(f"unknown metric depth engine {engine!r}; choose one of {METRIC_ENGINES}")
+def prior_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                          progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``prior`` relative engine: the disparity of the room layout prior (no image content)."""
+    _report(progress, len(cos))
+    return (1.0 / (layout_radial_depth(dirs) * cos)).astype(np.float32), {
+        "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
+
+
+def depth_anything_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                          progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``depth_anything`` relative engine (holoflow.engines.depth_anything; weights: ``cfg.model``)."""
+    from holoflow.engines import depth_anything
+
+    out = depth_anything.relative_disparity(images, cfg.model, device, progress)
+    return np.asarray(out, dtype=np.float32), {"engine": "depth_anything", "model": cfg.model}
+
+
+def simulated_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                            progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``simulated`` metric engine (SIMULATION from the truth, ``SIM_METRIC``)."""
+    out = simulated_metric(_need_truth(truth_radial, "zoedepth"), cos, seed)
+    _report(progress, len(out))
+    return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_METRIC),
+                 "note": "SIMULATED metric depth from the scene truth, not a network"}
+
+
+def prior_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                        progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``prior`` metric engine: the z of the room layout prior (no image content)."""
+    _report(progress, len(cos))
+    return (layout_radial_depth(dirs) * cos).astype(np.float32), {
+        "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
+
+
+def zoedepth_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                    progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``zoedepth`` metric engine (holoflow.engines.zoedepth; weights: ``cfg.model``)."""
+    from holoflow.engines import zoedepth
+
+    out = zoedepth.metric_depth(images, cfg.model, device, progress)
+    return np.asarray(out, dtype=np.float32), {"engine": "zoedepth", "model": cfg.model}
+
+
+def layout_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                           progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``layout`` relative engine: perspective disparity of the image-driven layout (sky 0)."""
+    radial, facts = _layout_radial(pano, dirs, cfg)
+    _report(progress, len(cos))
+    z = radial * cos
+    return np.where(np.isfinite(z) & (z > 0), 1.0 / np.where(z > 0, z, 1.0), 0.0).astype(np.float32), {
+        "engine": "layout", "layout": facts, "note": "image-driven layout estimate (no weights)"}
+
+
+def layout_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                         progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``layout`` metric engine: perspective depth z of the image-driven layout (+inf sky), metres."""
+    radial, facts = _layout_radial(pano, dirs, cfg)
+    _report(progress, len(cos))
+    return (radial * cos).astype(np.float32), {
+        "engine": "layout", "layout": facts, "note": "image-driven layout estimate (no weights)"}
+
+
+def _layout_radial(pano, dirs: np.ndarray, cfg) -> tuple[np.ndarray, dict]:
+    """Radial depth [F, h, w] (metres, +inf sky) of the layout engine at the face directions, and its
+    facts; ``cfg.camera_height`` and ``cfg.scene`` configure it (holoflow.depth.layout.LayoutConfig)."""
+    import torch
+
+    from holoflow.depth.layout import LayoutConfig, estimate_layout_depth
+    from holoflow.geometry.sampling import sample_equirect
+
+    if pano is None:
+        raise ValueError("engine 'layout' needs the panorama image")
+    est = estimate_layout_depth(pano, LayoutConfig(camera_height=cfg.camera_height, scene=cfg.scene))
+    disp = np.where(np.isfinite(est.depth), 1.0 / np.maximum(est.depth, 1e-6), 0.0)  # [H, W], sky 0
+    d = sample_equirect(torch.from_numpy(disp[None].astype(np.float64)),
+                        torch.from_numpy(np.asarray(dirs, dtype=np.float64)), mode="nearest")[:, 0].numpy()
+    return np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.inf), est.facts
+
+
+def _need_truth(truth_radial: np.ndarray | None, network: str) -> np.ndarray:
+    if truth_radial is None:
+        raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
+                         f"panorama); use engine 'prior' or '{network}' for a panorama without one")
+    return truth_radial
 
 
 def _report(progress: Progress, n: int) -> None:

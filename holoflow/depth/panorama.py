@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from holoflow.depth.align import Alignment, align_faces
-from holoflow.depth.engines import Progress, metric_depth, relative_disparity, resolve_engine
+from holoflow.depth.config import MetricAlignParams, TangentDepthParams
+from holoflow.depth.engines import Progress, resolve_engine
 from holoflow.depth.faces import face_rays, find_overlaps
 from holoflow.depth.metric import disparity_to_depth, robust_affine_fit
 from holoflow.depth.metrics import depth_metrics
@@ -81,35 +82,34 @@ def sample_radial(radial: np.ndarray, K, viewmat, size: int) -> np.ndarray:
     return np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.inf)
 
 
-def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, face_size: int = 256,
-                       padding: float = 1.0, method: str = "grid", grid=(8, 7), smoothness: float = 1.0,
-                       scale_reg: float = 0.001, blend_ramp: float = 0.1, seed: int = 0, model: str = "",
-                       device: str = "cpu", progress: Progress = None, layout: dict | None = None) -> TangentDepth:
-    """Relative radial disparity [H, W] of a panorama [H, W, 3] (see the module docstring).
+def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, cfg: TangentDepthParams,
+                       seed: int = 0, device: str = "cpu", progress: Progress = None) -> TangentDepth:
+    """Relative radial disparity [H, W] of a panorama [H, W, 3] (see the module docstring), with
+    tangent_depth's ``cfg`` (face_size, padding, alignment, blend_ramp; ``width`` is the caller's).
 
-    ``truth`` [H, W] radial depth (needed by the ``simulated`` engine only); ``blend_ramp`` the frustum
-    weights' ramp (fraction of the half-size, holoflow.geometry.icosahedron.frustum_weight);
-    ``progress(done, total, what)``; ``engine`` ``auto`` resolves by ``resolve_engine``; ``layout``
-    (LayoutConfig fields) configures the ``layout`` engine.
+    ``truth`` [H, W] radial depth (needed by the ``simulated`` engine only); ``engine`` a name in
+    ``TangentDepthParams.ENGINES`` (``auto`` resolves by ``resolve_engine``; the result's engine facts
+    say which ran and why); ``progress(done, total, what)``.
     """
     H, W = pano.shape[:2]
     engine, why = resolve_engine(engine, truth is not None)
-    faces = icosahedron_faces(face_size, padding)
+    size = cfg.face_size
+    faces = icosahedron_faces(size, cfg.padding)
     K, V = _np(faces.K), _np(faces.viewmat)
-    images = sample_faces(pano, K, V, face_size).astype(np.float32)  # [F, h, w, 3]
-    dirs, cos = face_rays(K, V, face_size, face_size)
-    truth_faces = sample_radial(truth, K, V, face_size) if truth is not None else None
-    raw, meta = relative_disparity(engine, images, dirs, cos, truth_faces, seed, model, device, progress,
-                                   pano=pano, layout=layout)
+    images = sample_faces(pano, K, V, size).astype(np.float32)  # [F, h, w, 3]
+    dirs, cos = face_rays(K, V, size, size)
+    truth_faces = sample_radial(truth, K, V, size) if truth is not None else None
+    raw, meta = _engine(TangentDepthParams, engine, "relative")(images, dirs, cos, truth_faces, seed, cfg, device,
+                                                                progress, pano=pano)
     meta = {**meta, "why": why}
     raw = np.asarray(raw, dtype=np.float64)
     if raw.shape != cos.shape:
         raise ValueError(f"depth engine {engine!r} returned {raw.shape}, expected {cos.shape}")
-    overlaps = find_overlaps(K, V, face_size, face_size, stride=max(1, face_size // 64))
-    al = align_faces(raw, np.isfinite(raw), cos, overlaps, method, tuple(grid), smoothness, scale_reg)
+    overlaps = find_overlaps(K, V, size, size, stride=max(1, size // 64))
+    al = align_faces(raw, np.isfinite(raw), cos, overlaps, cfg)
     from holoflow.geometry.icosahedron import frustum_weight
 
-    disparity = blend_faces(al.radial, _np(frustum_weight(faces, blend_ramp)), K, V, H, W)
+    disparity = blend_faces(al.radial, _np(frustum_weight(faces, cfg.blend_ramp)), K, V, H, W)
     return TangentDepth(disparity.astype(np.float32), raw.astype(np.float32), al.radial.astype(np.float32),
                         al, meta)
 
@@ -163,40 +163,31 @@ class MetricDepth:
 
 
 def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.ndarray | None, engine: str,
-                          n_faces: int = 6, face_size: int = 256, padding: float = 0.3, seed: int = 0,
-                          max_depth: float = 3000.0, huber: float = 0.05, model: str = "",
-                          device: str = "cpu", progress: Progress = None, layout: dict | None = None) -> MetricDepth:
-    """Metric radial depth from a relative disparity [H, W] and metric depth on a seeded face subset
-    (``engine`` ``auto`` resolves by ``resolve_engine``; ``layout`` configures the ``layout`` engine)."""
+                          cfg: MetricAlignParams, seed: int = 0, device: str = "cpu",
+                          progress: Progress = None) -> MetricDepth:
+    """Metric radial depth from a relative disparity [H, W] and metric depth (``engine``, a name in
+    ``MetricAlignParams.ENGINES``; ``auto`` resolves by ``resolve_engine``) on a seeded subset of
+    cfg.faces faces, with metric_align's ``cfg``."""
     engine, why = resolve_engine(engine, truth is not None)
-    if not 1 <= n_faces <= 20:
-        raise ValueError(f"metric_align faces must be in 1..20, got {n_faces}")
-    if max_depth <= 0:
-        raise ValueError(f"max_depth must be > 0, got {max_depth}")
-    faces = icosahedron_faces(face_size, padding)
-    chosen = sorted(int(i) for i in np.random.default_rng([seed, 1]).choice(20, n_faces, replace=False))
+    size = cfg.face_size
+    faces = icosahedron_faces(size, cfg.padding)
+    chosen = sorted(int(i) for i in np.random.default_rng([seed, 1]).choice(20, cfg.faces, replace=False))
     K, V = _np(faces.K)[chosen], _np(faces.viewmat)[chosen]
-    images = sample_faces(pano, K, V, face_size).astype(np.float32)
-    dirs, cos = face_rays(K, V, face_size, face_size)
-    truth_faces = sample_radial(truth, K, V, face_size) if truth is not None else None
-    z, meta = metric_depth(engine, images, dirs, cos, truth_faces, [seed, 2], model, device, progress,
-                           pano=pano, layout=layout)
+    images = sample_faces(pano, K, V, size).astype(np.float32)
+    dirs, cos = face_rays(K, V, size, size)
+    truth_faces = sample_radial(truth, K, V, size) if truth is not None else None
+    z, meta = _engine(MetricAlignParams, engine, "metric")(images, dirs, cos, truth_faces, [seed, 2], cfg, device,
+                                                          progress, pano=pano)
     meta = {**meta, "why": why}
     z = np.asarray(z, dtype=np.float64)
     ref = np.where(np.isfinite(z) & (z > 0), cos / np.where(z > 0, z, 1.0), np.nan)  # radial disparity
-    x = sample_faces(disparity, K, V, face_size)[..., 0]
-    fit = robust_affine_fit(x, ref, huber=huber)
+    x = sample_faces(disparity, K, V, size)[..., 0]
+    fit = robust_affine_fit(x, ref, huber=cfg.huber)
     if not fit["scale"] > 0:
         raise ValueError(f"metric alignment gave a non-positive scale ({fit['scale']:.3g}): the relative "
                          "disparity does not grow with the reference disparity (wrong engine output?)")
-    depth = disparity_to_depth(disparity, fit["scale"], fit["offset"], max_depth)
+    depth = disparity_to_depth(disparity, fit["scale"], fit["offset"], cfg.max_depth)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
-
-
-def layout_params(params: dict) -> dict:
-    """The ``layout`` engine's settings (holoflow.depth.layout.LayoutConfig fields) among a depth stage's
-    params: ``camera_height`` (metres) and ``scene`` (auto | indoor | outdoor)."""
-    return {k: params[k] for k in ("camera_height", "scene") if k in params}
 
 
 def oracle_metrics(disparity: np.ndarray, truth: np.ndarray, max_depth: float = 3000.0) -> dict:
@@ -211,6 +202,13 @@ def oracle_metrics(disparity: np.ndarray, truth: np.ndarray, max_depth: float = 
 def score(depth: np.ndarray, truth: np.ndarray) -> dict:
     """depth_metrics of a radial depth [H, W] against a truth of any size (nearest-resized)."""
     return depth_metrics(depth, resize_radial(truth, *depth.shape))
+
+
+def _engine(params_class, name: str, kind: str):
+    """The registered depth engine ``name`` of a stage's params class (ValueError, one line, if none)."""
+    if name not in params_class.ENGINES.names:
+        raise ValueError(f"unknown {kind} depth engine {name!r}; choose one of {params_class.ENGINES.names}")
+    return params_class.ENGINES.get(name)
 
 
 def _np(x) -> np.ndarray:

@@ -49,3 +49,16 @@ def stylize(pano: np.ndarray, lineart: np.ndarray, prompt: str, width: int = 153
                    callback_on_step_end_tensor_inputs=["latents"]).images
     img = decode_periodic(pipe.vae, ext[..., :w], pad=k)
     return srgb_to_linear(to_hwc(resize_wrap(img, height, width)))
+
+
+def stylize_engine(base: np.ndarray, prompt: str, cfg, seed: int, device: str, progress: Progress):
+    """stylize's ``controlnet_lineart`` engine (holoflow.imageops.config.StylizeParams): the base
+    panorama's lineart conditions SD 1.5. Returns (pano, lineart [h, w], attrs, meta) at cfg's size."""
+    from holoflow.imageops.lineart import lineart
+    from holoflow.imageops.resize import lanczos_resize
+
+    base_lines = lineart(base)
+    out = stylize(base, base_lines, prompt, cfg.width, cfg.height, cfg.steps, cfg.strength, seed, cfg.model,
+                  cfg.controlnet, device, progress)
+    lines = lanczos_resize(base_lines, cfg.width, cfg.height).clip(0.0, 1.0)
+    return out, lines, {}, {"model": cfg.model or "default", "controlnet": cfg.controlnet or "default"}

@@ -93,3 +93,10 @@ def refine(pano: np.ndarray, prompt: str, width: int = 6144, height: int = 3072,
     out = (acc[:, :, :width] / np.maximum(wsum[:, :width], 1e-12)).astype(np.float32)
     report(progress, n, n, "tiles")
     return srgb_to_linear(np.clip(out.transpose(1, 2, 0), 0, 1))
+
+
+def detail_engine(pano: np.ndarray, prompt: str, cfg, seed: int, device: str, progress: Progress):
+    """detail's ``controlnet_tile`` engine (holoflow.imageops.config.DetailParams): (pano, meta)."""
+    out = refine(pano, prompt, cfg.width, cfg.height, cfg.strength, cfg.tile, cfg.overlap, cfg.steps, seed,
+                 cfg.model, cfg.controlnet, device, progress)
+    return out, {"model": cfg.model or "default", "controlnet": cfg.controlnet or "default"}

@@ -41,3 +41,11 @@ def generate_pano(prompt: str, width: int = 1024, height: int = 512, steps: int 
                    callback_on_step_end_tensor_inputs=["latents"]).images            # [1, C, h, w + k]
     img = decode_periodic(pipe.vae, ext[..., :w], pad=k)                            # [1, 3, h*s, w*s]
     return srgb_to_linear(to_hwc(resize_wrap(img, height, width)))
+
+
+def base_pano_engine(prompt: str, cfg, seed: int, device: str, progress: Progress):
+    """base_pano's ``diffusion360`` engine (holoflow.scene.config.BasePanoParams): no depth."""
+    from holoflow.scene.config import Panorama
+
+    rgb = generate_pano(prompt, cfg.width, cfg.height, cfg.steps, cfg.guidance, seed, cfg.model, device, progress)
+    return Panorama(rgb, meta={"model": cfg.model or "default"})

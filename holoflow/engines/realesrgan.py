@@ -167,3 +167,9 @@ def upscale(pano: np.ndarray, width: int, height: int, model: str = "", tile: in
         img = resize_wrap(img.float(), height, width)
     report(progress, passes + 1, passes + 1, "passes")
     return srgb_to_linear(to_hwc(img.clamp(0, 1)))
+
+
+def upscale_engine(pano: np.ndarray, prompt: str, cfg, seed: int, device: str, progress: Progress):
+    """upscale's ``realesrgan`` engine (holoflow.imageops.config.UpscaleParams): (pano, meta)."""
+    return upscale(pano, cfg.width, cfg.height, cfg.model, cfg.tile, device, progress), \
+        {"model": cfg.model or "default"}

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from holoflow.recon.config import InpSetParams
+
 OPENCV_METHODS = ("telea", "ns", "fsr_fast", "fsr_best")     # cv2 methods; ``background``: see inpaint_views
 
 
@@ -120,9 +122,10 @@ def background_fill(image: np.ndarray, missing: np.ndarray, depth: np.ndarray, m
     return out, ~valid & ~done
 
 
-def inpaint_views(images: np.ndarray, masks: np.ndarray, engine: str, params: dict, device: str = "cpu",
+def inpaint_views(images: np.ndarray, masks: np.ndarray, engine: str, cfg: InpSetParams, device: str = "cpu",
                   progress=None, depths: np.ndarray | None = None) -> np.ndarray:
-    """Inpaint only the views that have missing pixels, with engine ``opencv`` or ``lama``.
+    """Inpaint only the views that have missing pixels, with ``engine`` (a name in
+    ``InpSetParams.ENGINES``: opencv, lama) and inp_set's ``cfg``.
     images [N, H, W, 3] sRGB [0, 1]; masks [N, H, W] bool; depths [N, H, W] metres (the render's
     depth, needed by opencv method ``background``: ``background_fill``, then ``telea`` for what it
     cannot reach). Returns [N, H, W, 3] float32 where observed pixels equal the input."""
@@ -132,27 +135,34 @@ def inpaint_views(images: np.ndarray, masks: np.ndarray, engine: str, params: di
     out = images.copy()
     if len(todo) == 0:
         return out
-    method = params.get("method", "background")
-    if engine == "opencv" and method == "background":
-        if depths is None:
-            raise ValueError("inpaint: method 'background' needs the rendered depth")
-        pre = [background_fill(images[i], masks[i], np.asarray(depths[i], np.float32),
-                               int(params.get("max_dist", 32))) for i in todo]
-        filled = inpaint_opencv(np.stack([f for f, _ in pre]), np.stack([r for _, r in pre]), "telea",
-                                float(params.get("radius", 5)))
-    elif engine == "opencv":
-        filled = inpaint_opencv(images[todo], masks[todo], method, float(params.get("radius", 5)))
-    elif engine == "lama":
-        import torch
-
-        from holoflow.engines import lama
-        from holoflow.recon.views import linear_to_srgb, srgb_to_linear
-
-        linear = srgb_to_linear(torch.from_numpy(images[todo])).numpy()   # the engine takes linear RGB
-        filled = lama.inpaint(linear, masks[todo].astype(np.float32), params.get("model", ""), device, progress)
-        filled = linear_to_srgb(torch.from_numpy(np.asarray(filled, np.float32))).numpy()
-    else:
-        raise ValueError(f"inpaint: unknown engine {engine!r}, expected opencv or lama")
+    filled = InpSetParams.ENGINES.get(engine)(images[todo], masks[todo], None if depths is None else
+                                              np.asarray(depths)[todo], cfg, device, progress)
     m = masks[todo][..., None]
     out[todo] = np.where(m, filled, images[todo])
     return out
+
+
+def opencv_engine(images: np.ndarray, masks: np.ndarray, depths: np.ndarray | None, cfg: InpSetParams,
+                  device: str = "cpu", progress=None) -> np.ndarray:
+    """inp_set's ``opencv`` engine: cfg.method ``background`` (``background_fill`` within cfg.max_dist px,
+    then telea for what it cannot reach; needs ``depths``) or a cv2 method (cfg.radius px)."""
+    if cfg.method != "background":
+        return inpaint_opencv(images, masks, cfg.method, cfg.radius)
+    if depths is None:
+        raise ValueError("inpaint: method 'background' needs the rendered depth")
+    pre = [background_fill(images[i], masks[i], np.asarray(depths[i], np.float32), cfg.max_dist)
+           for i in range(len(images))]
+    return inpaint_opencv(np.stack([f for f, _ in pre]), np.stack([r for _, r in pre]), "telea", cfg.radius)
+
+
+def lama_engine(images: np.ndarray, masks: np.ndarray, depths: np.ndarray | None, cfg: InpSetParams,
+                device: str = "cpu", progress=None) -> np.ndarray:
+    """inp_set's ``lama`` engine (holoflow.engines.lama, weights: cfg.model); LaMa takes linear RGB."""
+    import torch
+
+    from holoflow.engines import lama
+    from holoflow.recon.views import linear_to_srgb, srgb_to_linear
+
+    linear = srgb_to_linear(torch.from_numpy(images)).numpy()
+    filled = lama.inpaint(linear, masks.astype(np.float32), cfg.model, device, progress)
+    return linear_to_srgb(torch.from_numpy(np.asarray(filled, np.float32))).numpy()

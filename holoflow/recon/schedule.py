@@ -19,15 +19,16 @@ import numpy as np
 import torch
 
 from holoflow import metrics
+from holoflow.recon.config import OptimParams, PreOptParams, TransferOptParams
 
 Progress = Callable[[int, int], None]
 TRAIN_SEED_STRIDE = 1_000_003   # train_seed k moves every phase's seed by k x this (a prime, far from 1000 i)
 
 
-def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float = 0.1, device: str = "cpu"):
+def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str = "cpu"):
     """Gaussians (SH degree 0) at the points xyz [N, 3] metres, coloured rgb [N, 3] uint8 (sRGB), with
-    initial ``opacity`` (3DGS: 0.1; a surface point cloud tolerates more, which shortens training), on
-    ``device``."""
+    initial ``opacity`` (a stage's ``init_opacity``; 3DGS: 0.1; a surface point cloud tolerates more,
+    which shortens training), on ``device``."""
     from holoflow.splat import GaussianModel
 
     if len(xyz) == 0:
@@ -53,8 +54,8 @@ def panorama_extent(xyz: np.ndarray) -> float:
     return max(float(r.median()), 1e-6)
 
 
-def train_config(iterations: int, params: dict, backend: str, extent: float | None = None):
-    """A ``holoflow.splat.TrainConfig`` for one phase from a stage's params: ``densify_every``,
+def train_config(iterations: int, cfg: OptimParams, backend: str, extent: float | None = None):
+    """A ``holoflow.splat.TrainConfig`` for one phase from a stage's params (``cfg``): ``densify_every``,
     ``densify_from`` and ``densify_stop`` (densification runs at steps densify_from < it <=
     min(densify_stop x iterations, iterations - densify_every)),
     ``opacity_reset_every`` (0 = never, the paper) and ``max_gaussians``; ``backend`` is the
@@ -62,25 +63,20 @@ def train_config(iterations: int, params: dict, backend: str, extent: float | No
     default)."""
     from holoflow.splat import TrainConfig
 
-    every, iters = int(params.get("densify_every", 100)), int(iterations)
-    stop = float(params.get("densify_stop", 0.5))
-    if not 0.0 <= stop <= 1.0:
-        raise ValueError(f"densify_stop must be in [0, 1], got {stop}")
+    every, iters = cfg.densify_every, int(iterations)
     # densification ends at densify_stop x iterations (3DGS: 15k of 30k) and leaves at least
     # ``every`` steps to train what it added last
-    return TrainConfig(iterations=iters, densify_every=every,
-                       densify_from=int(params.get("densify_from", 500)),
-                       densify_until=max(1, min(int(stop * iters), iters - every) + 1),
-                       opacity_reset_every=int(params.get("opacity_reset_every", 0)),
-                       max_gaussians=int(params.get("max_gaussians", 2_000_000)), backend=backend,
-                       scene_extent=extent)
+    return TrainConfig(iterations=iters, densify_every=every, densify_from=cfg.densify_from,
+                       densify_until=max(1, min(int(cfg.densify_stop * iters), iters - every) + 1),
+                       opacity_reset_every=cfg.opacity_reset_every, max_gaussians=cfg.max_gaussians,
+                       backend=backend, scene_extent=extent)
 
 
-def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, backend: str, seed: int,
+def run_phases(model, phases: list[tuple[str, list[dict], int]], cfg: OptimParams, backend: str, seed: int,
                progress: Progress | None = None, extent: float | None = None) -> dict:
     """Train ``model`` in place through ``phases`` = [(name, views, iterations)], in order; phases with
     0 iterations are skipped. ``progress(done, total)`` counts iterations over all phases.
-    Phase i draws its views from seed + 1000 i + TRAIN_SEED_STRIDE x ``params['train_seed']`` (default 0):
+    Phase i draws its views from seed + 1000 i + TRAIN_SEED_STRIDE x ``cfg.train_seed``:
     another train_seed gives an independent optimisation of the same inputs (training noise).
     ``extent``: the scene extent (m) of every phase (``panorama_extent``; None: the trainer's default).
     Returns the log: per phase the trainer's log and the Gaussian count after it; wall seconds per
@@ -103,8 +99,8 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, b
                 progress(_start + int(k), total)
 
         t0 = time.perf_counter()
-        phase_seed = seed + 1000 * i + TRAIN_SEED_STRIDE * int(params.get("train_seed", 0))
-        tlog = train(model, views, train_config(iters, params, backend, extent), progress=phase_progress,
+        phase_seed = seed + 1000 * i + TRAIN_SEED_STRIDE * cfg.train_seed
+        tlog = train(model, views, train_config(iters, cfg, backend, extent), progress=phase_progress,
                      seed=phase_seed)
         done += iters
         tlog.pop("time_s", None)
@@ -115,26 +111,25 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], params: dict, b
 
 
 def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pano_views: list[dict],
-                 params: dict, backend: str, seed: int,
+                 cfg: PreOptParams, backend: str, seed: int,
                  progress: Progress | None = None, device: str = "cpu"):
-    """G0: init from P_f, ``pcd_iters`` on the PCD set (masked), then ``pano_iters`` on the PANO set,
-    trained on ``device``. Returns (model, log)."""
-    model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)), device)
-    log = run_phases(model, [("pcd", pcd_views, int(params["pcd_iters"])),
-                             ("pano", pano_views, int(params["pano_iters"]))], params, backend, seed, progress,
-                     panorama_extent(xyz))
+    """G0: init from P_f, ``cfg.pcd_iters`` on the PCD set (masked), then ``cfg.pano_iters`` on the PANO
+    set, trained on ``device``. Returns (model, log)."""
+    model = init_model(xyz, rgb_u8, cfg.init_opacity, device)
+    log = run_phases(model, [("pcd", pcd_views, cfg.pcd_iters), ("pano", pano_views, cfg.pano_iters)], cfg,
+                     backend, seed, progress, panorama_extent(xyz))
     return model, log
 
 
 def transfer_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pano_views: list[dict], inp_views: list[dict],
-                      params: dict, backend: str, seed: int,
+                      cfg: TransferOptParams, backend: str, seed: int,
                       progress: Progress | None = None, device: str = "cpu"):
-    """G1: fresh init from P_f, ``iters`` on PANO + INP sets together (INP left out when
-    ``params['use_inp']`` is false: the paper's ablation), trained on ``device``. Returns (model, log)."""
-    model = init_model(xyz, rgb_u8, float(params.get("init_opacity", 0.1)), device)
-    views = pano_views + (inp_views if params.get("use_inp", True) else [])
-    log = run_phases(model, [("pano+inp" if params.get("use_inp", True) else "pano", views,
-                              int(params["iters"]))], params, backend, seed, progress, panorama_extent(xyz))
+    """G1: fresh init from P_f, ``cfg.iters`` on PANO + INP sets together (INP left out when
+    ``cfg.use_inp`` is false: the paper's ablation), trained on ``device``. Returns (model, log)."""
+    model = init_model(xyz, rgb_u8, cfg.init_opacity, device)
+    views = pano_views + (inp_views if cfg.use_inp else [])
+    log = run_phases(model, [("pano+inp" if cfg.use_inp else "pano", views, cfg.iters)], cfg, backend, seed,
+                     progress, panorama_extent(xyz))
     return model, log
 
 

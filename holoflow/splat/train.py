@@ -1,17 +1,17 @@
 """3DGS optimisation: Adam with the original learning rates, 0.8 L1 + 0.2 (1 - SSIM) on supervised
-pixels, adaptive density control (clone / split / prune) and optional opacity reset."""
+pixels; adaptive density control (clone / split / prune, optional opacity reset) by the strategy
+object of holoflow/splat/strategy.py."""
 from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import asdict, dataclass
 
 import torch
 
 from holoflow.splat.model import GaussianModel
-from holoflow.splat.project import quat_to_rotmat
 from holoflow.splat.rasterize import render
+from holoflow.splat.strategy import DefaultStrategy
 
 
 @dataclass
@@ -123,7 +123,8 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
     opt = _make_optimizer(model, cfg, extent)
     lr_steps = cfg.lr_means_steps or cfg.iterations
     n = len(model)
-    stats = _zero_stats(n, dev)
+    strategy = DefaultStrategy(cfg, extent, centroid, gen)
+    strategy.initialize_state(n, dev)
     bg = torch.tensor(cfg.background, dtype=torch.float32, device=dev)
     log = dict(config=asdict(cfg), seed=seed, extent=extent, initial_count=n, loss=[], count=[],
                densify=[], notes=[])
@@ -150,25 +151,15 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
         loss = masked_loss(out["rgb"][0], image, mask, cfg.lambda_dssim)
         loss.backward()
         log["loss"].append(float(loss.detach()))
+        strategy.step_pre_optimizer(it, means2d, out["meta"]["radii"], W, H)
         with torch.no_grad():
-            if it < cfg.densify_until and means2d.grad is not None:
-                radii = out["meta"]["radii"][0].float()                          # [N]
-                vis = radii > 0
-                g = means2d.grad[0] * means2d.new_tensor([W / 2, H / 2])          # [N, 2] NDC units
-                stats["grad"][vis] += g[vis].norm(dim=-1)
-                stats["count"][vis] += 1
-                stats["radii"][vis] = torch.maximum(stats["radii"][vis], radii[vis])
             opt.step()
             opt.zero_grad(set_to_none=True)
-            if cfg.densify_from < it < cfg.densify_until and it % cfg.densify_every == 0:
-                event = _densify_and_prune(model, opt, stats, cfg, extent, centroid, it, gen)
-                log["densify"].append(event)
-                if event.get("note"):
-                    log["notes"].append(event["note"])
-                stats = _zero_stats(len(model), dev)
-            if (cfg.opacity_reset_every and it % cfg.opacity_reset_every == 0
-                    and it < cfg.densify_until):
-                _reset_opacity(model, opt)
+        event = strategy.step_post_optimizer(model, opt, it)
+        if event is not None:
+            log["densify"].append(event)
+            if event.get("note"):
+                log["notes"].append(event["note"])
         log["count"].append(len(model))
         if progress is not None:
             progress(it, cfg.iterations)
@@ -183,94 +174,9 @@ def _views_on(views: list[dict], dev: torch.device) -> list[dict]:
     return [dict(image=f32(v["image"]), mask=f32(v.get("mask")), K=f32(v["K"])) for v in views]
 
 
-def _zero_stats(n: int, device) -> dict[str, torch.Tensor]:
-    """Densification statistics [n]: summed gradient norm, views seen, max screen radius (px)."""
-    return {k: torch.zeros(n, device=device) for k in ("grad", "count", "radii")}
-
-
 def _make_optimizer(model: GaussianModel, cfg: TrainConfig, extent: float) -> torch.optim.Adam:
     groups = [("means", cfg.lr_means * extent), ("sh_dc", cfg.lr_features),
               ("sh_rest", cfg.lr_features / 20), ("opacity_logits", cfg.lr_opacity),
               ("log_scales", cfg.lr_scaling), ("quats", cfg.lr_rotation)]
     return torch.optim.Adam([{"params": [getattr(model, k)], "lr": lr, "name": k} for k, lr in groups],
                             lr=0.0, eps=1e-15)
-
-
-def _replace_params(model: GaussianModel, opt: torch.optim.Adam, keep: torch.Tensor,
-                    extra: dict[str, torch.Tensor]) -> None:
-    """Keep rows ``keep`` [N] bool of every parameter and append ``extra`` rows; Adam moments follow
-    (zeros for the new rows)."""
-    for group in opt.param_groups:
-        name = group["name"]
-        old = group["params"][0]
-        new = torch.cat([old.detach()[keep], extra[name].to(old)]).requires_grad_(True)
-        state = opt.state.pop(old, None)
-        if state:
-            for key in ("exp_avg", "exp_avg_sq"):
-                state[key] = torch.cat([state[key][keep], torch.zeros_like(extra[name])])
-            opt.state[new] = state
-        group["params"][0] = new
-        setattr(model, name, new)
-
-
-def _densify_and_prune(model, opt, stats, cfg: TrainConfig, extent: float, centroid: torch.Tensor,
-                       it: int, gen: torch.Generator) -> dict:
-    """Clone small / split large Gaussians with a high mean view-space gradient, then prune."""
-    grads = torch.nan_to_num(stats["grad"] / stats["count"])                     # [N]
-    scales = torch.exp(model.log_scales.detach())                                # [N, 3]
-    big = scales.max(-1).values > cfg.percent_dense * extent
-    hot = grads >= cfg.densify_grad_threshold
-    clone, split = hot & ~big, hot & big
-    note = None
-    room = cfg.max_gaussians - len(model)
-    n_want = int(clone.sum() + split.sum())                                      # +1 each
-    if n_want > max(room, 0):
-        cand = torch.nonzero(hot).squeeze(1)
-        keep_n = max(room, 0)
-        top = cand[torch.argsort(grads[cand], descending=True, stable=True)[:keep_n]]
-        chosen = torch.zeros_like(hot)
-        chosen[top] = True
-        clone, split = clone & chosen, split & chosen
-        note = (f"step {it}: max_gaussians={cfg.max_gaussians} reached; densified {keep_n} of "
-                f"{n_want} candidates (highest gradients first)")
-        warnings.warn(note, stacklevel=3)
-    p = {name: getattr(model, name).detach() for name in GaussianModel.PARAMS}
-    extra = {k: v[clone] for k, v in p.items()}
-    # Split: two samples from each Gaussian, scales / 1.6 (3DGS).
-    idx = torch.nonzero(split).squeeze(1).repeat(2)
-    std = scales[idx]                                                            # [2S, 3]
-    offs = torch.randn(std.shape, generator=gen).to(std) * std
-    rot = quat_to_rotmat(p["quats"][idx])                                        # [2S, 3, 3]
-    sp = {k: v[idx] for k, v in p.items()}
-    sp["means"] = p["means"][idx] + torch.einsum("sij,sj->si", rot, offs)
-    sp["log_scales"] = torch.log(std / (0.8 * 2))
-    extra = {k: torch.cat([extra[k], sp[k]]) for k in p}
-    _replace_params(model, opt, ~split, extra)
-    n_after = len(model)
-    # Prune.
-    opac = torch.sigmoid(model.opacity_logits.detach())
-    prune = opac < cfg.prune_opacity
-    if it > cfg.size_prune_from:
-        radii = torch.cat([stats["radii"][~split], stats["radii"].new_zeros(n_after - int((~split).sum()))])
-        prune |= radii > cfg.prune_screen_size
-        reach = torch.linalg.vector_norm(model.means.detach() - centroid, dim=-1).clamp(min=extent)  # [N]
-        prune |= torch.exp(model.log_scales.detach()).max(-1).values > 0.1 * reach
-    _replace_params(model, opt, ~prune, {k: p[k][:0] for k in p})
-    return dict(step=it, cloned=int(clone.sum()), split=int(split.sum()), pruned=int(prune.sum()),
-                count=len(model), note=note)
-
-
-def _reset_opacity(model: GaussianModel, opt: torch.optim.Adam) -> None:
-    """Opacity <= 0.01 for every Gaussian; its Adam moments restart."""
-    logit = model.opacity_logits.detach()
-    capped = torch.minimum(logit, torch.full_like(logit, math.log(0.01 / 0.99)))
-    group = next(g for g in opt.param_groups if g["name"] == "opacity_logits")
-    old = group["params"][0]
-    new = capped.clone().requires_grad_(True)
-    state = opt.state.pop(old, None)
-    if state:
-        state["exp_avg"] = torch.zeros_like(new)
-        state["exp_avg_sq"] = torch.zeros_like(new)
-        opt.state[new] = state
-    group["params"][0] = new
-    model.opacity_logits = new

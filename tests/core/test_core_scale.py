@@ -197,8 +197,9 @@ def test_concurrent_commits_of_one_key_first_wins(tmp_path):
 
 @pytest.mark.parametrize("text, value", [(".inf", math.inf), ("-.inf", -math.inf), (".nan", math.nan)])
 def test_non_finite_params_hash_canonically(text, value):
-    p = pipeline.load(Path(__file__).resolve().parents[2] / "pipeline.yaml")
-    got = pipeline.resolve(p, None, [f"point_cloud.grad_threshold={text}"])["point_cloud"].params["grad_threshold"]
+    # a float param with no valid range (the toy pipeline's): the real stages' classes bound theirs
+    p = pipeline.load(Path(__file__).resolve().parent / "fixtures" / "pipeline.yaml")
+    got = pipeline.resolve(p, None, [f"upper.scale={text}"])["upper"].params["scale"]
     assert type(got) is float and (math.isnan(got) if math.isnan(value) else got == value)
 
     def key(v):
@@ -206,6 +207,15 @@ def test_non_finite_params_hash_canonically(text, value):
 
     assert key(got) == key(float(text.replace(".", "")))          # same value, same key (nan included)
     assert key(got) not in {key(0.4), key(text), key(-got if not math.isnan(got) else 0.0)}
+
+
+def test_non_finite_params_of_the_real_stages_obey_their_ranges():
+    p = pipeline.load(Path(__file__).resolve().parents[2] / "pipeline.yaml")
+    got = pipeline.resolve(p, None, ["point_cloud.grad_threshold=.inf"])["point_cloud"].params["grad_threshold"]
+    assert got == math.inf                                           # keep every point: a valid threshold
+    for text in ("-.inf", ".nan"):
+        with pytest.raises(pipeline.PipelineError, match="outside the valid range >= 0"):
+            pipeline.resolve(p, None, [f"point_cloud.grad_threshold={text}"])
 
 
 def test_inf_param_runs_and_stays_cached(project, capsys):

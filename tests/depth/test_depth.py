@@ -10,6 +10,7 @@ import pytest
 
 from holoflow.depth import panorama as pd
 from holoflow.depth.align import align_faces
+from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 from holoflow.depth.engines import layout_radial_depth, simulated_relative
 from holoflow.depth.faces import face_rays, find_overlaps
 from holoflow.depth.metric import disparity_to_depth, robust_affine_fit
@@ -95,13 +96,13 @@ def test_alignment_recovers_per_face_affine(faces32):
     truth = 1.0 / r
     errs = {}
     for method in ("median", "affine", "grid"):
-        al = align_faces(raw, np.ones_like(raw, bool), cos, ov, method=method, grid=(3, 3))
+        al = align_faces(raw, np.ones_like(raw, bool), cos, ov, TangentDepthParams(align=method, grid=(3, 3)))
         fit = robust_affine_fit(al.radial.ravel(), truth.ravel())
         pred = fit["scale"] * al.radial + fit["offset"]
         errs[method] = float(np.mean(np.abs(pred - truth) / truth))
         assert np.isfinite(al.radial).all() and al.face_ok.all()
     assert errs["affine"] < 1e-3 and errs["grid"] < 2e-3 and errs["median"] > 0.02
-    al = align_faces(raw, np.ones_like(raw, bool), cos, ov, method="grid", grid=(3, 3))
+    al = align_faces(raw, np.ones_like(raw, bool), cos, ov, TangentDepthParams(align="grid", grid=(3, 3)))
     assert al.scale.shape == (20, 3, 3) and al.residuals["rel_mean_abs"] < 5e-3
 
 
@@ -112,7 +113,7 @@ def test_grid_beats_affine_beats_median_on_simulated_faces(faces32):
     truth = 1.0 / r
     errs = {}
     for method in ("median", "affine", "grid"):
-        al = align_faces(raw, np.isfinite(raw), cos, ov, method=method, grid=(4, 4))
+        al = align_faces(raw, np.isfinite(raw), cos, ov, TangentDepthParams(align=method, grid=(4, 4)))
         fit = robust_affine_fit(al.radial.ravel(), truth.ravel())
         errs[method] = float(np.mean(np.abs(fit["scale"] * al.radial + fit["offset"] - truth) / truth))
     assert errs["grid"] < errs["affine"] < errs["median"], errs
@@ -168,7 +169,7 @@ def test_bad_engine_values_and_empty_face_stay_finite(faces32):
     raw[1, :, :3] = np.inf
     raw[2, 10:12] = -5.0
     raw[3] = np.nan  # a face with no valid pixel
-    al = align_faces(raw, np.isfinite(raw), cos, ov, method="grid", grid=(3, 3))
+    al = align_faces(raw, np.isfinite(raw), cos, ov, TangentDepthParams(align="grid", grid=(3, 3)))
     assert not al.face_ok[3] and "3" in al.residuals["dropped_faces"]
     disp = pd.blend_faces(al.radial, np.ones_like(raw), K, V, 16, 32)
     assert np.isfinite(disp).all()
@@ -178,10 +179,10 @@ def test_negative_scale_face_is_dropped(faces32):
     K, V, dirs, cos, ov = faces32
     raw = 1.0 / (_scene_radial(dirs) * cos)
     raw[5] = -raw[5]  # an engine that inverted one face
-    al = align_faces(raw, np.ones_like(raw, bool), cos, ov, method="median")
+    al = align_faces(raw, np.ones_like(raw, bool), cos, ov, TangentDepthParams(align="median"))
     assert not al.face_ok[5] and "median" in al.residuals["dropped_faces"]["5"]
     for method in ("affine", "grid"):
-        al = align_faces(raw, np.ones_like(raw, bool), cos, ov, method=method, grid=(2, 2))
+        al = align_faces(raw, np.ones_like(raw, bool), cos, ov, TangentDepthParams(align=method, grid=(2, 2)))
         assert np.isfinite(al.radial[al.face_ok]).all()
         assert (al.scale.reshape(20, -1).mean(1)[al.face_ok] > 0).all()
 
@@ -189,42 +190,43 @@ def test_negative_scale_face_is_dropped(faces32):
 def test_constant_and_all_sky(room_pano):
     rgb, r = room_pano
     sky = np.full_like(r, np.inf)
-    res = pd.estimate_disparity(rgb, sky, "simulated", face_size=16, grid=(2, 2))
+    res = pd.estimate_disparity(rgb, sky, "simulated", TangentDepthParams(face_size=16, grid=(2, 2)))
     assert np.isfinite(res.disparity).all()
     with pytest.raises(ValueError):  # nothing metric to fit against, or a constant disparity
-        pd.metric_from_disparity(res.disparity, rgb, sky, "simulated", n_faces=3, face_size=16)
+        pd.metric_from_disparity(res.disparity, rgb, sky, "simulated", MetricAlignParams(faces=3, face_size=16))
     with pytest.raises(ValueError, match="constant"):
-        pd.metric_from_disparity(np.ones_like(r), rgb, r, "simulated", n_faces=3, face_size=16)
+        pd.metric_from_disparity(np.ones_like(r), rgb, r, "simulated", MetricAlignParams(faces=3, face_size=16))
     const = align_faces(np.ones((20, 8, 8)), np.ones((20, 8, 8), bool), np.ones((20, 8, 8)),
                         find_overlaps(*[pd._np(x) for x in (pd.icosahedron_faces(8, 0.3).K,
-                                                            pd.icosahedron_faces(8, 0.3).viewmat)], 8, 8))
+                                                            pd.icosahedron_faces(8, 0.3).viewmat)], 8, 8),
+                        TangentDepthParams())
     assert np.isfinite(const.radial).all()
 
 
 def test_negative_metric_scale_is_a_clear_error(room_pano):
     rgb, r = room_pano
     with pytest.raises(ValueError, match="non-positive scale"):
-        pd.metric_from_disparity(-1.0 / r, rgb, r, "simulated", n_faces=4, face_size=16)
+        pd.metric_from_disparity(-1.0 / r, rgb, r, "simulated", MetricAlignParams(faces=4, face_size=16))
 
 
 def test_tiny_panorama_and_prior_engine():
     rgb = np.random.default_rng(0).random((4, 8, 3)).astype(np.float32)
-    res = pd.estimate_disparity(rgb, None, "prior", face_size=8, grid=(2, 2))
+    res = pd.estimate_disparity(rgb, None, "prior", TangentDepthParams(face_size=8, grid=(2, 2)))
     assert res.disparity.shape == (4, 8) and np.isfinite(res.disparity).all()
-    md = pd.metric_from_disparity(res.disparity, rgb, None, "prior", n_faces=3, face_size=8)
+    md = pd.metric_from_disparity(res.disparity, rgb, None, "prior", MetricAlignParams(faces=3, face_size=8))
     assert np.isfinite(md.depth).all() and (md.depth > 0).all()
     with pytest.raises(ValueError, match="truth"):
-        pd.estimate_disparity(rgb, None, "simulated", face_size=8)
+        pd.estimate_disparity(rgb, None, "simulated", TangentDepthParams(face_size=8))
 
 
 def test_pipeline_accuracy_on_analytic_room(room_pano):
     """End to end with the simulated engines: grid alignment + metric step lands near the goal."""
     rgb, r = room_pano
-    res = pd.estimate_disparity(rgb, r, "simulated", face_size=32, grid=(4, 4))
-    md = pd.metric_from_disparity(res.disparity, rgb, r, "simulated", n_faces=6, face_size=32)
+    res = pd.estimate_disparity(rgb, r, "simulated", TangentDepthParams(face_size=32, grid=(4, 4)))
+    md = pd.metric_from_disparity(res.disparity, rgb, r, "simulated", MetricAlignParams(faces=6, face_size=32))
     m = pd.score(md.depth, r)
     assert m["abs_rel"] < 0.08 and m["delta1"] > 0.95 and m["coverage"] == 1.0
-    again = pd.estimate_disparity(rgb, r, "simulated", face_size=32, grid=(4, 4))
+    again = pd.estimate_disparity(rgb, r, "simulated", TangentDepthParams(face_size=32, grid=(4, 4)))
     assert np.array_equal(again.disparity, res.disparity)
 
 
@@ -275,11 +277,11 @@ def test_stages_write_contract_and_metrics(tmp_path, room_pano):
 def test_unknown_engines_fail_clearly(room_pano):
     rgb, r = room_pano
     with pytest.raises(ValueError, match="unknown relative depth engine"):
-        pd.estimate_disparity(rgb, r, "nonesuch", face_size=8)
+        pd.estimate_disparity(rgb, r, "nonesuch", TangentDepthParams(face_size=8))
     with pytest.raises(ValueError, match="unknown metric depth engine"):
-        pd.metric_from_disparity(1.0 / r, rgb, r, "nonesuch", n_faces=2, face_size=8)
-    with pytest.raises(ValueError, match="unknown alignment method"):
-        pd.estimate_disparity(rgb, r, "prior", face_size=8, method="nonesuch")
+        pd.metric_from_disparity(1.0 / r, rgb, r, "nonesuch", MetricAlignParams(faces=2, face_size=8))
+    with pytest.raises(ValueError, match="align='nonesuch' is not one of median, affine, grid"):
+        pd.estimate_disparity(rgb, r, "prior", TangentDepthParams(face_size=8, align="nonesuch"))
 
 
 def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room_pano):
@@ -310,9 +312,9 @@ def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room
     monkeypatch.setattr(zoedepth, "metric_depth", fake("zd", lambda zf: zf))
     calls = []
     progress = lambda done, total, what: calls.append((done, total, what))  # noqa: E731
-    res = pd.estimate_disparity(rgb, None, "depth_anything", face_size=16, padding=0.3, grid=(2, 2),
-                                 progress=progress)
-    md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth", n_faces=3, face_size=16,
+    res = pd.estimate_disparity(rgb, None, "depth_anything", TangentDepthParams(face_size=16, padding=0.3, grid=(2, 2)),
+                                progress=progress)
+    md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth", MetricAlignParams(faces=3, face_size=16),
                                   progress=progress)
     assert np.allclose(seen["da"], linear, atol=1e-6)
     assert np.allclose(seen["zd"], linear[md.faces], atol=1e-6)
@@ -332,10 +334,11 @@ def test_real_engines_dispatch_with_tiny_random_models(tmp_path, room_pano):
     rgb, r = room_pano
     da = save_depth_anything(tmp_path / "da")
     zd = save_zoedepth(tmp_path / "zd")
-    res = pd.estimate_disparity(rgb, None, "depth_anything", face_size=16, grid=(2, 2), model=str(da))
+    res = pd.estimate_disparity(rgb, None, "depth_anything", TangentDepthParams(face_size=16, grid=(2, 2), model=str(da)))
     assert res.engine["engine"] == "depth_anything" and np.isfinite(res.disparity).all()
     try:
-        md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth", n_faces=2, face_size=16, model=str(zd))
+        md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth",
+                                      MetricAlignParams(faces=2, face_size=16, model=str(zd)))
     except ValueError as exc:  # a random network may give a disparity unrelated to its random metric depth
         assert "scale" in str(exc) or "constant" in str(exc)
     else:

@@ -110,11 +110,12 @@ def test_tilt_is_estimated_and_corrected():
 
 def test_layout_engine_plugs_into_the_depth_stages():
     from holoflow.depth import panorama as pd
+    from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 
     img = _room(64, 128)
-    td = pd.estimate_disparity(img, None, "auto", face_size=16, grid=(2, 2))
+    td = pd.estimate_disparity(img, None, "auto", TangentDepthParams(face_size=16, grid=(2, 2)))
     assert td.engine["engine"] == "layout" and "no truth" in td.engine["why"]
-    md = pd.metric_from_disparity(td.disparity, img, None, "auto", n_faces=6, face_size=16)
+    md = pd.metric_from_disparity(td.disparity, img, None, "auto", MetricAlignParams(faces=6, face_size=16))
     assert md.engine["engine"] == "layout"
     assert np.isfinite(md.depth).all() and (md.depth > 0).all()
     assert 1.5 < np.median(md.depth[28:36]) < 5.0  # the horizon's walls (3 m) survive alignment

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from holoflow.recon.config import InpSetParams
 from holoflow.recon.inpaint import DIRECTIONS, OPENCV_METHODS, background_fill, first_observed, inpaint_views, missing_mask
 
 
@@ -29,7 +30,7 @@ def test_opencv_fills_every_missing_pixel_and_keeps_the_rest(method):
     masks[2, :, :3] = True                        # view 2: a border strip
     holed = imgs.copy()
     holed[masks] = 0.0                            # the hole carries garbage
-    out = inpaint_views(holed, masks, "opencv", {"method": method, "radius": 3})
+    out = inpaint_views(holed, masks, "opencv", InpSetParams(method=method, radius=3))
     assert np.array_equal(out[~masks], holed[~masks])          # observed pixels bit-exact
     assert np.array_equal(out[1], holed[1])                    # nothing missing: untouched
     err = np.abs(out[masks] - imgs[masks]).mean()
@@ -41,13 +42,13 @@ def test_views_without_missing_pixels_are_not_inpainted():
     imgs = _scene(2)
     masks = np.zeros(imgs.shape[:3], bool)
     # an unknown engine would raise if it were called: with nothing missing it must not be
-    out = inpaint_views(imgs, masks, "no-such-engine", {})
+    out = inpaint_views(imgs, masks, "no-such-engine", InpSetParams())
     assert np.array_equal(out, imgs)
 
 
 def test_fully_missing_view_is_finite():
     imgs = _scene(1)
-    out = inpaint_views(imgs, np.ones(imgs.shape[:3], bool), "opencv", {"method": "telea"})
+    out = inpaint_views(imgs, np.ones(imgs.shape[:3], bool), "opencv", InpSetParams(method="telea"))
     assert np.isfinite(out).all()
 
 
@@ -88,7 +89,7 @@ def test_background_fill_continues_the_far_side_not_the_occluder():
     assert not left.any()
     assert np.array_equal(out[~missing], holed[~missing])
     err_bg = np.abs(out[missing] - truth[missing]).mean()
-    telea = inpaint_views(holed[None], missing[None], "opencv", {"method": "telea", "radius": 5})[0]
+    telea = inpaint_views(holed[None], missing[None], "opencv", InpSetParams(method="telea", radius=5))[0]
     err_telea = np.abs(telea[missing] - truth[missing]).mean()
     assert out[missing][:, 1].max() < 0.05                         # no green from the box leaks in
     assert err_bg < 0.02 and err_bg < 0.5 * err_telea
@@ -99,7 +100,8 @@ def test_background_method_needs_depth_and_fills_everything():
     m = missing.copy()
     m[:, 28:] = True                                               # a border strip
     with pytest.raises(ValueError):
-        inpaint_views(img[None], m[None], "opencv", {"method": "background"})
+        inpaint_views(img[None], m[None], "opencv", InpSetParams(method="background"))
     # max_dist 2: the hole's middle columns are out of reach and left to telea
-    out = inpaint_views(img[None], m[None], "opencv", {"method": "background", "max_dist": 2}, depths=depth[None])[0]
+    out = inpaint_views(img[None], m[None], "opencv", InpSetParams(method="background", max_dist=2),
+                        depths=depth[None])[0]
     assert np.isfinite(out).all() and np.array_equal(out[~m], img[~m])

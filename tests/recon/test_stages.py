@@ -214,20 +214,22 @@ def test_inp_set_lama_without_weights_is_one_line_error(chain, tmp_path):
                                                 (100, 0.5, [50]), (60, 0.5, []), (2000, 0.0, [])])
 def test_densification_stops_at_densify_stop(iters, stop, steps):
     """Densify at densify_from < step <= min(densify_stop x iters, iters - densify_every)."""
+    from holoflow.recon.config import PreOptParams
     from holoflow.recon.schedule import train_config
 
-    cfg = train_config(iters, {"densify_every": 50, "densify_from": 40, "densify_stop": stop}, "cpu")
+    cfg = train_config(iters, PreOptParams(densify_every=50, densify_from=40, densify_stop=stop), "cpu")
     got = [it for it in range(1, iters + 1)
            if cfg.densify_from < it < cfg.densify_until and it % cfg.densify_every == 0]
     assert got == steps
     with pytest.raises(ValueError, match="densify_stop"):
-        train_config(iters, {"densify_stop": 1.5}, "cpu")
+        PreOptParams(densify_stop=1.5)
 
 
 def test_train_seed_gives_an_independent_optimisation_and_zero_keeps_the_old_draws():
     """train_seed 0 reproduces the phase seeds (seed + 1000 i); another value changes every phase's
     view order, so `holoflow eval --repeats` measures training noise on unchanged inputs."""
     from holoflow.geometry.camera import intrinsics_from_fov, look_at
+    from holoflow.recon.config import PreOptParams
     from holoflow.recon.schedule import TRAIN_SEED_STRIDE, init_model, run_phases
 
     g = torch.Generator().manual_seed(0)
@@ -240,7 +242,7 @@ def test_train_seed_gives_an_independent_optimisation_and_zero_keeps_the_old_dra
 
     def fit(train_seed):
         model = init_model(xyz, rgb, 0.5)
-        params = {"densify_every": 100, "densify_from": 500, "train_seed": train_seed}
+        params = PreOptParams(densify_every=100, densify_from=500, train_seed=train_seed)
         log = run_phases(model, [("a", views, 3), ("b", views, 3)], params, "reference", seed=7)
         return model.means.detach().clone(), [ph["train"]["seed"] for ph in log["phases"]]
 

@@ -1,0 +1,54 @@
+"""point_cloud's, pano_set's and pcd_set's parameters (one engine each: ``default``). Imports nothing
+heavy."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from holoflow.params import Engines, StageParams, param
+
+
+@dataclass(frozen=True)
+class PointCloudParams(StageParams):
+    """Equirect RGB-D -> P0, P_f, P_s (holoflow/geometry/pointcloud.py)."""
+
+    ENGINES = Engines("one engine, the method: equirect_to_points(rgb [H, W, 3], radial depth [H, W]) per cloud",
+                      default="holoflow.geometry.pointcloud:equirect_to_points")
+
+    p0_width: int = param(1024, "P0 at depth resolution", "px", ge=2)
+    pf_width: int = param(512, "P_f: downsampled, then depth-gradient filtered", "px", ge=2)
+    ps_width: int = param(256, "P_s: for the PCD-set projection", "px", ge=2)
+    grad_threshold: float = param(0.4, "P_f drops points whose relative depth gradient exceeds this "
+                                  "(paper 0.4)", ge=0)
+    sky_radius: float = param(0.0, "far shell radius for unbounded pixels (0 = 2x the 99th percentile depth)",
+                              "m", ge=0)
+
+
+@dataclass(frozen=True)
+class PanoSetParams(StageParams):
+    """The panorama seen by the base cameras (holoflow/geometry/rigs.py)."""
+
+    ENGINES = Engines("one engine, the method: equirect_to_pinhole(pano [3, H, W], K, viewmats, size, size)",
+                      default="holoflow.geometry.sampling:equirect_to_pinhole")
+
+    rig: str = param("fibonacci", "base camera layout: poles + golden-angle spiral (holoflow/geometry/rigs.py)",
+                     choices=("fibonacci",))
+    cameras: int = param(38, "number of base cameras (paper 38)", ge=1)
+    size: int = param(128, "view side (paper 512)", "px", ge=1)
+    fov_deg: float = param(47.43, "horizontal field of view; focal 582.69 px at 512 (LucidDreamer); 38 "
+                           "cameras need >= 47 deg to cover", "deg", gt=0, lt=180)
+
+
+@dataclass(frozen=True)
+class PcdSetParams(StageParams):
+    """P_s seen by the supplementary cameras through a z-buffer (holoflow/geometry/pcdset.py)."""
+
+    ENGINES = Engines("one engine, the method: pcd_set(points, linear, K, base viewmats, width, height, cfg)",
+                      default="holoflow.geometry.pcdset:pcd_set")
+
+    offset: float = param(0.1, "supplementary camera offset", "fraction of the base view's median depth", ge=0)
+    angle_deg: float = param(10.0, "supplementary cameras turn back towards the base view's axis by this",
+                             "deg")
+    splat_radius: int = param(0, "z-buffer splat radius; 0 = each point's own footprint (no sampling gaps)",
+                              "px", ge=0)
+    edge_threshold: float = param(0.4, "P_s points on occlusion edges (relative depth gradient above this) "
+                                  "leave the image and A, not `seen`; 0 = keep all", ge=0)

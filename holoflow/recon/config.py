@@ -1,0 +1,73 @@
+"""pre_opt's, inp_set's and transfer_opt's parameters and engines (docs/reconstruction.md). Imports
+nothing heavy. The splatting stages' engine is the rasterizer backend (holoflow/splat/rasterize.py)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from holoflow.params import Engines, StageParams, param
+
+_RASTER = "holoflow.splat.rasterize:rasterize"     # one contract, the backend picked by name
+_SPLAT_ENGINES = Engines("rasterize(..., backend=ENGINE): the rasterizer every training step and render use",
+                         {"auto": "gsplat when the run's device is cuda, else cpu (resolved before the cache key)"},
+                         cpu=_RASTER, gsplat=_RASTER, reference=_RASTER)
+
+
+@dataclass(frozen=True)
+class OptimParams(StageParams):
+    """What both optimisation schedules share (holoflow/recon/schedule.py)."""
+
+    init_opacity: float = param(0.5, "opacity of the Gaussians made from P_f (3DGS: 0.1)", gt=0, lt=1)
+    densify_every: int = param(50, "split / clone every this many iterations (paper: 100)", "iters", ge=1)
+    densify_from: int = param(40, "densify at densify_from < step <= densify_stop x iters (3DGS: from 500)",
+                              "iters", ge=0)
+    densify_stop: float = param(0.5, "... and <= iters - densify_every (3DGS: until 15k of 30k; "
+                                "docs/reconstruction.md)", "fraction of iters", ge=0, le=1)
+    opacity_reset_every: int = param(0, "0 = never (paper: no opacity reset)", "iters", ge=0)
+    max_gaussians: int = param(200000, "densification stops growing past this count", ge=1)
+    train_seed: int = param(0, "another value = an independent optimisation of the same inputs "
+                            "(holoflow eval --repeats)", ge=0)
+
+
+@dataclass(frozen=True)
+class PreOptParams(OptimParams):
+    """G0: Gaussians from P_f, trained on the PCD set (masked), then on the PANO set."""
+
+    ENGINES = _SPLAT_ENGINES
+
+    pcd_iters: int = param(60, "phase 1: PCD set, loss masked to pixels a point landed on (paper 2000)",
+                           "iters", ge=0)
+    pano_iters: int = param(60, "phase 2: PANO set (paper 2000)", "iters", ge=0)
+
+
+@dataclass(frozen=True)
+class TransferOptParams(OptimParams):
+    """G1: fresh Gaussians from P_f, trained on the PANO and INP sets together."""
+
+    ENGINES = _SPLAT_ENGINES
+
+    iters: int = param(150, "PANO + INP sets (paper 5000 = 1.25 x pre_opt's 2000 + 2000; every profile "
+                       "keeps 1.25x)", "iters", ge=0)
+    use_inp: bool = param(True, "false = transfer on the PANO set only (the paper's ablation)")
+    preview_size: int = param(96, "side of the look-around preview renders", "px", ge=1)
+
+
+@dataclass(frozen=True)
+class InpSetParams(StageParams):
+    """G0 rendered at the supplementary cameras; missing pixels inpainted (holoflow/recon/inpaint.py)."""
+
+    ENGINES = Engines(
+        "engine(images: [N, H, W, 3] sRGB, masks: [N, H, W] bool, depths: [N, H, W] m | None,"
+        " cfg: InpSetParams, device: str, progress) -> [N, H, W, 3] sRGB",
+        opencv="holoflow.recon.inpaint:opencv_engine",
+        lama="holoflow.recon.inpaint:lama_engine")
+
+    alpha_threshold: float = param(0.5, "missing = rendered alpha < this OR no P_s point seen "
+                                   "(docs/reconstruction.md)", ge=0, le=1)
+    observed: str = param("render", "observed pixels: render = G0's render (the paper's Eq. 3), pcd = the "
+                          "PCD set's colour where a point landed", choices=("render", "pcd"))
+    method: str = param("background", "opencv: background (far-side fill, then telea), telea, ns, "
+                        "fsr_fast, fsr_best", choices=("background", "telea", "ns", "fsr_fast", "fsr_best"))
+    radius: int = param(5, "opencv telea / ns neighbourhood", "px", ge=1)
+    max_dist: int = param(32, "opencv background: farthest observed pixel looked for along each direction",
+                          "px", ge=1)
+    model: str = param("", "lama: local big-lama weights")

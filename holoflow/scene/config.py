@@ -1,0 +1,37 @@
+"""base_pano's parameters and engines (stages/base_pano.py). Imports nothing heavy."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from holoflow.params import Engines, StageParams, param
+
+
+@dataclass(frozen=True)
+class BasePanoParams(StageParams):
+    """Text prompt -> equirectangular panorama (docs/panorama.md)."""
+
+    ENGINES = Engines(
+        "engine(prompt: str, cfg: BasePanoParams, seed: int, device: str, progress) -> Panorama",
+        procedural="holoflow.scene.pano:procedural_pano",
+        diffusion360="holoflow.engines.diffusion360:base_pano_engine")
+
+    width: int = param(1024, "panorama width", "px", ge=1)
+    height: int = param(512, "panorama height (width / 2)", "px", ge=1)
+    samples: int = param(2, "procedural: antialiasing samples per pixel side", ge=1)
+    model: str = param("", "diffusion360: local dir or model id in the user's cache")
+    steps: int = param(30, "diffusion360: denoising steps", ge=1)
+    guidance: float = param(7.5, "diffusion360: classifier-free guidance scale", ge=0)
+
+
+@dataclass
+class Panorama:
+    """What a base_pano engine returns: ``rgb`` [H, W, 3] linear; ``depth`` [H, W] radial metres (+inf
+    sky) when the engine knows it, else None; ``attrs`` extra EXR header entries; ``files`` extra output
+    files (name -> text); ``meta`` provenance for the step's record."""
+
+    rgb: Any
+    depth: Any = None
+    attrs: dict = field(default_factory=dict)
+    files: dict = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)
