@@ -31,6 +31,9 @@ _SKIP_DIRS = {"__pycache__", ".git", ".pytest_cache", ".mypy_cache", ".ipynb_che
 _SKIP_SUFFIXES = {".pyc", ".pyo", ".swp", ".tmp"}
 
 
+FORMAT_KEY, CACHE_FORMAT = "#format", 2      # code.json layout; 2: imports include entry-point strings
+
+
 class CodeHasher:
     """Source digests and import lists cached by (size, mtime_ns); ``save()`` writes the cache back if
     it changed.
@@ -51,6 +54,8 @@ class CodeHasher:
                 self._cache = json.loads(cache_file.read_text())
             except (OSError, ValueError):
                 self._cache = {}
+            if self._cache.get(FORMAT_KEY) != CACHE_FORMAT:      # entries of an older parser: drop them
+                self._cache = {FORMAT_KEY: CACHE_FORMAT}
 
     def version(self, paths: list[Path]) -> dict[str, str]:
         """{path relative to the root: digest} over every source file under ``paths``."""

@@ -8,19 +8,23 @@ package whose ``__init__`` defines a module-level ``__getattr__`` (PEP 562 lazy 
 holoflow/scene) counts as importing all its direct submodules. Modules are looked up in the search roots in order, as Python would for a script: the
 program's folder, then the pipeline's folder, then the folder holding the ``holoflow`` package (for
 ``holoflow`` only). Standard-library and third-party modules are outside the roots and not followed;
-neither are names built at run time (``importlib.import_module(name)``): a stage lists such files in
-its ``code:``.
+names built at run time (``importlib.import_module(name)``) are not, except one form: a string literal
+``"package.module:attribute"`` anywhere in a file (an entry-point reference, as the engine registries
+of holoflow/params.py hold) counts as ``import package.module``. Anything else loaded by name goes in
+the stage's ``code:``.
 """
 from __future__ import annotations
 
 import ast
 import os
+import re
 from dataclasses import dataclass
 from typing import Callable
 
 HOLOFLOW_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 ImportRecord = tuple[int, str, list[str]]           # (level, module, imported names); [] for `import m`
+ENTRY_POINT = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+):[A-Za-z_]\w*$")   # "pkg.mod:attr"
 
 
 def parse_imports(tree: ast.Module) -> tuple[list[ImportRecord], bool]:
@@ -34,6 +38,8 @@ def parse_imports(tree: ast.Module) -> tuple[list[ImportRecord], bool]:
             records.extend((0, alias.name, []) for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
             records.append((node.level, node.module or "", [alias.name for alias in node.names]))
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and (m := ENTRY_POINT.match(node.value)):
+            records.append((0, m.group(1), []))
         elif isinstance(node, ast.If) and _is_type_checking(node.test):
             stack.extend(reversed(node.orelse))         # the body never runs
             continue

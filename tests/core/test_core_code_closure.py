@@ -114,3 +114,12 @@ def test_status_names_a_function_level_import(project, capsys):
     assert lines["upper"].split(None, 1) == ["stale", "code changed: tools/b.py"]
     assert lines["gen"].startswith("fresh")
     assert lines["join"] == "stale    upstream not fresh: upper"
+
+
+def test_entry_point_strings_count_as_imports(tmp_path):
+    _write(tmp_path, {
+        "prog.py": "from reg import ENGINES\n",
+        "reg.py": 'ENGINES = {"fast": "impl.fast:run", "doc": "not an import: a.b c"}\n',
+        "impl/__init__.py": "", "impl/fast.py": "def run(): pass\n",
+    })
+    assert _closure(tmp_path, "prog.py") == {"prog.py", "reg.py", "impl/__init__.py", "impl/fast.py"}

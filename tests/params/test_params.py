@@ -70,19 +70,19 @@ def test_bad_value_in_pipeline_yaml_params_or_a_profile_fails_at_load(tmp_path):
 
 
 def test_pipeline_params_override_the_class_defaults(tmp_path):
-    block = ("    run: stages/pre_opt.py\n    engine: cpu\n    engines: [cpu, gsplat]\n"
+    block = ("    run: stages/pre_opt.py\n    engine: cpu\n    engines: [cpu, gsplat, auto]\n"
              "    config: holoflow.recon.config:PreOptParams\n    params: {pcd_iters: 7}")
     pipe = pipeline.load(_pipeline(tmp_path, block))
     assert pipeline.resolve(pipe)["pre_opt"].params == {**PreOptParams.defaults(), "pcd_iters": 7}
 
 
 def test_registry_rejects_an_engine_pipeline_yaml_lists_but_nobody_registered(tmp_path):
-    block = ("    run: stages/pre_opt.py\n    engine: cpu\n    engines: [cpu, gsplatt]\n"
+    block = ("    run: stages/pre_opt.py\n    engine: cpu\n    engines: [cpu, gsplatt, auto]\n"
              "    config: holoflow.recon.config:PreOptParams")
     with pytest.raises(pipeline.PipelineError) as e:
         pipeline.load(_pipeline(tmp_path, block))
     assert str(e.value) == ("pipeline.yaml: stage 'pre_opt': engine 'gsplatt' is not registered for "
-                            "PreOptParams; fix: use one of: cpu, gsplat, reference (did you mean 'gsplat'?)")
+                            "PreOptParams; fix: use one of: cpu, gsplat, reference, auto (did you mean 'gsplat'?)")
 
 
 def test_config_must_name_a_param_class(tmp_path):
@@ -102,10 +102,12 @@ def test_direct_construction_is_checked_too():
 def test_every_registered_engine_resolves_to_a_callable():
     pipe = pipeline.load(ROOT / "pipeline.yaml")
     for s in pipe.stages.values():
-        for name in s.config.ENGINES.names:
+        for name in s.config.ENGINES.targets:
             assert callable(s.config.ENGINES.get(name)), (s.name, name)
     with pytest.raises(ValueError, match="unknown engine 'nope'; registered: cpu, gsplat, reference"):
         PreOptParams.ENGINES.get("nope")
+    with pytest.raises(ValueError, match="'auto' is chosen when the step runs"):     # a chooser, resolved first
+        PreOptParams.ENGINES.get("auto")
 
 
 def test_param_classes_and_the_params_command_import_no_heavy_library():
