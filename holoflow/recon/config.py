@@ -26,6 +26,11 @@ class OptimParams(StageParams):
     max_gaussians: int = param(200000, "densification stops growing past this count", ge=1)
     train_seed: int = param(0, "another value = an independent optimisation of the same inputs "
                             "(holoflow eval --repeats)", ge=0)
+    lr_decay: str = param("phase", "position lr decay from 1.6e-4 to 1.6e-6 x extent: once over all of a "
+                          "model's phases (model, as 3DGS; the paper profile) or afresh in every phase (phase)",
+                          choices=("phase", "model"))
+    sh_degree: int = param(0, "spherical-harmonics degree of the Gaussians' colour; one more band every 1000 "
+                           "iterations (3DGS: 3; the paper profile)", ge=0, le=3)
 
 
 @dataclass(frozen=True)

@@ -5,8 +5,10 @@ a point landed, so the densification that happens in this phase is steered by se
 around each base camera; then the PANO set alone, to restore the panorama's detail.
 Transfer Optimization (G1): fresh Gaussians from P_f, trained on the PANO and INP sets together.
 
-Each phase is one ``holoflow.splat.train`` call; the optimiser state and learning-rate schedule start
-afresh at each phase (the paper gives iteration counts per phase, nothing more). Opacity reset is off
+Each phase is one ``holoflow.splat.train`` call with a fresh optimiser state. The position-lr decay
+and the SH band schedule restart at each phase with ``lr_decay: phase`` (the preview profiles, where
+it was measured), or run once over all of a model's phases with ``lr_decay: model`` (3DGS's single
+schedule; the paper profile: the paper gives iteration counts per phase, nothing more). Opacity reset is off
 by default (``opacity_reset_every: 0``), as in the paper: it would wipe the point cloud's placement.
 """
 from __future__ import annotations
@@ -25,8 +27,10 @@ Progress = Callable[[int, int], None]
 TRAIN_SEED_STRIDE = 1_000_003   # train_seed k moves every phase's seed by k x this (a prime, far from 1000 i)
 
 
-def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str = "cpu"):
-    """Gaussians (SH degree 0) at the points xyz [N, 3] metres, coloured rgb [N, 3] uint8 (sRGB), with
+def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str = "cpu",
+               sh_degree: int = 0):
+    """Gaussians (SH degree ``sh_degree``, higher bands 0) at the points xyz [N, 3] metres, coloured
+    rgb [N, 3] uint8 (sRGB), with
     initial ``opacity`` (a stage's ``init_opacity``; 3DGS: 0.1; a surface point cloud tolerates more,
     which shortens training), on ``device``."""
     from holoflow.splat import GaussianModel
@@ -36,7 +40,7 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str 
     if not 0.0 < opacity < 1.0:
         raise ValueError(f"init_opacity must be in (0, 1), got {opacity}")
     return GaussianModel.from_points(np.asarray(xyz, np.float32), np.asarray(rgb_u8, np.float32) / 255.0,
-                                     sh_degree=0, opacity=opacity).to(device)
+                                     sh_degree=sh_degree, opacity=opacity).to(device)
 
 
 def panorama_extent(xyz: np.ndarray) -> float:
@@ -54,13 +58,16 @@ def panorama_extent(xyz: np.ndarray) -> float:
     return max(float(r.median()), 1e-6)
 
 
-def train_config(iterations: int, cfg: OptimParams, backend: str, extent: float | None = None):
+def train_config(iterations: int, cfg: OptimParams, backend: str, extent: float | None = None,
+                 lr_span: tuple[int, int] | None = None):
     """A ``holoflow.splat.TrainConfig`` for one phase from a stage's params (``cfg``): ``densify_every``,
     ``densify_from`` and ``densify_stop`` (densification runs at steps densify_from < it <=
     min(densify_stop x iterations, iterations - densify_every)),
     ``opacity_reset_every`` (0 = never, the paper) and ``max_gaussians``; ``backend`` is the
     rasterizer (the stage's engine); ``extent`` the scene extent in metres (None: the trainer's
-    default)."""
+    default); ``lr_span`` (steps done before this phase, total steps of the model) makes the position
+    lr decay and the SH bands continue one schedule across phases (``cfg.lr_decay == "model"``); None
+    runs both within the phase."""
     from holoflow.splat import TrainConfig
 
     every, iters = cfg.densify_every, int(iterations)
@@ -69,7 +76,8 @@ def train_config(iterations: int, cfg: OptimParams, backend: str, extent: float 
     return TrainConfig(iterations=iters, densify_every=every, densify_from=cfg.densify_from,
                        densify_until=max(1, min(int(cfg.densify_stop * iters), iters - every) + 1),
                        opacity_reset_every=cfg.opacity_reset_every, max_gaussians=cfg.max_gaussians,
-                       backend=backend, scene_extent=extent)
+                       backend=backend, scene_extent=extent,
+                       **({} if lr_span is None else dict(step_offset=lr_span[0], lr_means_steps=lr_span[1])))
 
 
 def run_phases(model, phases: list[tuple[str, list[dict], int]], cfg: OptimParams, backend: str, seed: int,
@@ -100,7 +108,8 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], cfg: OptimParam
 
         t0 = time.perf_counter()
         phase_seed = seed + 1000 * i + TRAIN_SEED_STRIDE * cfg.train_seed
-        tlog = train(model, views, train_config(iters, cfg, backend, extent), progress=phase_progress,
+        span = (start, total) if cfg.lr_decay == "model" else None
+        tlog = train(model, views, train_config(iters, cfg, backend, extent, span), progress=phase_progress,
                      seed=phase_seed)
         done += iters
         tlog.pop("time_s", None)
@@ -115,7 +124,7 @@ def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pan
                  progress: Progress | None = None, device: str = "cpu"):
     """G0: init from P_f, ``cfg.pcd_iters`` on the PCD set (masked), then ``cfg.pano_iters`` on the PANO
     set, trained on ``device``. Returns (model, log)."""
-    model = init_model(xyz, rgb_u8, cfg.init_opacity, device)
+    model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree)
     log = run_phases(model, [("pcd", pcd_views, cfg.pcd_iters), ("pano", pano_views, cfg.pano_iters)], cfg,
                      backend, seed, progress, panorama_extent(xyz))
     return model, log
@@ -126,7 +135,7 @@ def transfer_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pano_views: list[dict
                       progress: Progress | None = None, device: str = "cpu"):
     """G1: fresh init from P_f, ``cfg.iters`` on PANO + INP sets together (INP left out when
     ``cfg.use_inp`` is false: the paper's ablation), trained on ``device``. Returns (model, log)."""
-    model = init_model(xyz, rgb_u8, cfg.init_opacity, device)
+    model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree)
     views = pano_views + (inp_views if cfg.use_inp else [])
     log = run_phases(model, [("pano+inp" if cfg.use_inp else "pano", views, cfg.iters)], cfg, backend, seed,
                      progress, panorama_extent(xyz))

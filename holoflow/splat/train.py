@@ -25,6 +25,9 @@ class TrainConfig:
     """Final position lr (times extent), reached by log-linear decay at ``lr_means_steps``."""
     lr_means_steps: int | None = None
     """Steps of the position-lr decay (None: ``iterations``)."""
+    step_offset: int = 0
+    """Steps of this model's optimisation done before this call: the position-lr decay and the SH band
+    schedule continue from there (a later phase of the same model, as 3DGS's one schedule)."""
     lr_features: float = 2.5e-3
     """SH DC lr; higher bands use a twentieth of it."""
     lr_opacity: float = 5e-2
@@ -132,7 +135,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
     on_dev = _views_on(views, dev)                                  # images, masks, Ks moved once
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
-        frac = min(it / max(lr_steps, 1), 1.0)
+        frac = min((cfg.step_offset + it) / max(lr_steps, 1), 1.0)
         opt.param_groups[0]["lr"] = extent * math.exp(
             (1 - frac) * math.log(cfg.lr_means) + frac * math.log(cfg.lr_means_final))
         if not order:
@@ -141,7 +144,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
         v = on_dev[order_i]
         image = v["image"]
         H, W = image.shape[:2]
-        sh_degree = min(model.sh_degree, (it - 1) // max(cfg.sh_degree_every, 1))
+        sh_degree = min(model.sh_degree, (cfg.step_offset + it - 1) // max(cfg.sh_degree_every, 1))
         out = render(model, viewmats[order_i][None], v["K"][None], W, H, backend=cfg.backend,
                      background=bg, sh_degree=sh_degree)
         means2d = out["meta"]["means2d"]

@@ -251,3 +251,29 @@ def test_train_seed_gives_an_independent_optimisation_and_zero_keeps_the_old_dra
     m1, s1 = fit(1)
     assert s0 == [7, 1007] and s1 == [7 + TRAIN_SEED_STRIDE, 1007 + TRAIN_SEED_STRIDE]
     assert torch.equal(m0, m0b) and not torch.equal(m0, m1)
+
+
+@pytest.mark.parametrize("decay, offsets, spans", [("phase", [0, 0], [3, 5]), ("model", [0, 3], [8, 8])])
+def test_lr_decay_runs_once_over_the_model_or_per_phase(decay, offsets, spans):
+    """lr_decay model (3DGS, the paper profile): phase 2 continues phase 1's position-lr decay and SH
+    band schedule; phase (the preview default): each phase decays afresh over its own steps."""
+    from holoflow.geometry.camera import intrinsics_from_fov, look_at
+    from holoflow.recon.config import PreOptParams
+    from holoflow.recon.schedule import init_model, run_phases
+
+    g = torch.Generator().manual_seed(0)
+    xyz = (torch.rand(50, 3, generator=g) * 2 - 1).numpy() + np.array([0, 0, 4], np.float32)
+    rgb = (torch.rand(50, 3, generator=g) * 255).to(torch.uint8).numpy()
+    eye = torch.zeros(1, 3, dtype=torch.float64)
+    vm = look_at(eye, eye + torch.tensor([0.0, 0, 1], dtype=torch.float64)).float()[0]
+    views = [dict(image=torch.rand(8, 8, 3, generator=g), mask=None, viewmat=vm,
+                  K=intrinsics_from_fov(60.0, 8, 8).float())]
+    model = init_model(xyz, rgb, 0.5, sh_degree=1)
+    cfg = PreOptParams(densify_every=100, densify_from=500, lr_decay=decay, sh_degree=1)
+    log = run_phases(model, [("a", views, 3), ("b", views, 5)], cfg, "reference", seed=0)
+    got = [(ph["train"]["config"]["step_offset"], ph["train"]["config"]["lr_means_steps"] or ph["iterations"])
+           for ph in log["phases"]]
+    assert got == list(zip(offsets, spans))
+    assert model.sh_rest.shape == (50, 3, 3)                      # degree 1: three higher coefficients
+    with pytest.raises(ValueError, match="lr_decay"):
+        PreOptParams(lr_decay="never")
