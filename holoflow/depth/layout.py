@@ -15,6 +15,10 @@ it estimates a radial depth [H, W] in metres, +inf for sky:
    smoothness term (``boundary_dp``).
 4. **Upper boundary** per column likewise: where the ceiling (indoors) or the sky (outdoors) that
    contains the zenith ends.
+   Indoors (``manhattan``) the per-column state is instead a Manhattan wall: one of 4 orientations
+   from the horizontal vanishing directions x an offset, scored by the same floor / ceiling costs plus
+   the line segments along that wall's own direction, with a penalty per corner (``manhattan.py``);
+   below the horizon a column may end nearer, at its own free floor boundary (objects).
 5. **Depth.** The floor is the plane ``camera_height`` below the eye: radial depth h / sin(-lat).
    Whatever stands on the floor boundary is vertical, at horizontal distance d_f = h / tan(-lat_f).
    Indoors the ceiling height is the robust ratio of the two boundaries over the columns where the same
