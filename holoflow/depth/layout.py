@@ -15,6 +15,10 @@ it estimates a radial depth [H, W] in metres, +inf for sky:
    smoothness term (``boundary_dp``).
 4. **Upper boundary** per column likewise: where the ceiling (indoors) or the sky (outdoors) that
    contains the zenith ends.
+   Indoors (``manhattan``) the per-column state is instead a Manhattan wall: one of 4 orientations
+   from the horizontal vanishing directions x an offset, scored by the same floor / ceiling costs plus
+   the line segments along that wall's own direction, with a penalty per corner (``manhattan.py``);
+   below the horizon a column may end nearer, at its own free floor boundary (objects).
 5. **Depth.** The floor is the plane ``camera_height`` below the eye: radial depth h / sin(-lat).
    Whatever stands on the floor boundary is vertical, at horizontal distance d_f = h / tan(-lat_f).
    Indoors the ceiling height is the robust ratio of the two boundaries over the columns where the same
@@ -71,6 +75,27 @@ class LayoutConfig:
     """metres: the most likely horizontal distance of a wall (indoors) or facade (outdoors)."""
     prob_mix: float = 0.0
     """region probability = global colour model ^ (1 - mix) x per-column colour model ^ mix."""
+    manhattan: bool = True
+    """indoors: fit Manhattan walls (4 orientations from the horizontal vanishing directions x offsets)
+    per column instead of a free wall distance per column (falls back to free when no yaw is found)."""
+    wall_offsets: int = 64
+    """number of wall offsets (log-spaced, min_depth..max_depth_indoor, metres) per wall orientation."""
+    corner_penalty: float = 80.0
+    """cost (row-cost units, like the data costs) of each change of wall between neighbouring columns."""
+    objects: bool = True
+    """indoors (Manhattan fit): below the horizon a column ends at the nearer of its wall and its own
+    free floor boundary (furniture standing on the floor); above the horizon it is the wall."""
+    ceiling_steps: int = 29
+    """number of ceiling heights (log-spaced, 0.3..2.5 x camera_height above the eye) tried by the
+    Manhattan fit (each one a DP over the columns)."""
+    typical_ceiling: float = 1.2
+    """metres: the most likely height of the ceiling above the eye (a 2.4-3 m room, eye at 1.6 m)."""
+    ceiling_prior: float = 2.0
+    """weight per column of the log-normal prior (sigma 0.5 in log metres) on the ceiling height
+    around typical_ceiling (Manhattan fit only)."""
+    segment_weight: float = 20.0
+    """weight of the Manhattan-aligned line segments at a wall's floor / ceiling boundary (row-cost
+    units per unit of evidence); only segments along that wall's own horizontal direction count."""
 
 
 @dataclass
@@ -313,6 +338,13 @@ def _estimate(work, srgb, cfg, facts, H0, W0):
     # typical rooms: a weak log-normal prior on the wall distance (per column, in row-cost units)
     prior = cfg.distance_prior * (np.log(dist / cfg.typical_distance) / 0.7) ** 2
     data_f = cost_f[row_f] + prior[:, None]  # [K, Wk]
+    if scene == "indoor" and cfg.manhattan:
+        d = _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts)
+        if d is not None:
+            d_obj = None
+            if cfg.objects:  # things standing on the floor in front of the walls: the free floor boundary
+                d_obj = dist[boundary_dp(data_f, cfg.smoothness, cfg.jump)]
+            return _finish(d, facts["ceiling_above_eye_m"], h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges, d_obj)
     best = None
     heights = [None] if scene != "indoor" else list(h * np.exp(np.linspace(np.log(0.3), np.log(2.5), 15)))
     for ceiling in heights:
@@ -327,15 +359,60 @@ def _estimate(work, srgb, cfg, facts, H0, W0):
         if best is None or total < best[0]:
             best = (total, ceiling, k)
     _, ceiling, k = best
-    d = dist[k]  # [Wk] horizontal wall distance per column, metres
-    lat_f = -np.arctan(h / d)
+    if ceiling is not None:
+        facts["ceiling_above_eye_m"] = round(float(ceiling), 3)
+    return _finish(dist[k], ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges)
+
+
+def _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts):
+    """Horizontal wall distance per column [Wk] (metres) from the Manhattan wall DP (manhattan.py), or
+    None when no Manhattan yaw is found; sets facts manhattan / ceiling_above_eye_m."""
+    import scipy.ndimage as ndi
+
+    from holoflow.depth.manhattan import manhattan_dp, manhattan_yaw, segment_evidence, segment_rays, wall_distances
+
+    Hk, Wk = cost_f.shape
+    p1, p2, nrm, ln = segment_rays(srgb)
+    yaw, facts["manhattan"] = manhattan_yaw(nrm, ln)
+    if yaw is None:
+        return None
+    ev_f, ev_c = segment_evidence(p1, p2, nrm, yaw, Hk, Wk)  # [2, Hk, Wk] each
+    ev_f = ndi.maximum_filter1d(ev_f, 3, axis=1)  # +-1 row: a line sits on either side of the boundary
+    ev_c = ndi.maximum_filter1d(ev_c, 3, axis=1)
+    dmax = cfg.max_depth_indoor
+    offsets = np.exp(np.linspace(np.log(cfg.min_depth), np.log(dmax), cfg.wall_offsets))  # [K] metres
+    dW, valid = wall_distances(yaw, offsets, Wk, dmax)  # [S, Wk], S = 4 K
+    fam = np.repeat(1 - np.arange(4) % 2, len(offsets))[:, None]  # [S, 1]: the wall's line family
+    cols = np.arange(Wk)[None, :]
+    rf = np.clip(np.round((np.pi / 2 + np.arctan(h / dW)) / np.pi * Hk).astype(np.int64), 0, Hk - 1)
+    prior = cfg.distance_prior * (np.log(dW / cfg.typical_distance) / 0.7) ** 2
+    base = cost_f[rf, cols] + prior - cfg.segment_weight * ev_f[fam, rf, cols]  # [S, Wk]
+    best = None
+    for ceiling in h * np.exp(np.linspace(np.log(0.3), np.log(2.5), cfg.ceiling_steps)):
+        rc = np.clip(np.round((np.pi / 2 - np.arctan(ceiling / dW)) / np.pi * Hk).astype(np.int64), 1, Hk - 1)
+        data = base + cfg.ceiling_weight * (cost_c[Hk - rc, cols] - cfg.segment_weight * ev_c[fam, rc, cols])
+        data = np.where(valid, data, 1e6)
+        path = manhattan_dp(data, cfg.corner_penalty)
+        corners = int(np.count_nonzero(path != np.roll(path, 1)))
+        total = float(data[path, cols[0]].sum()) + cfg.corner_penalty * corners
+        total += Wk * cfg.ceiling_prior * (np.log(ceiling / cfg.typical_ceiling) / 0.5) ** 2
+        if best is None or total < best[0]:
+            best = (total, ceiling, path, corners)
+    _, ceiling, path, corners = best
+    facts["ceiling_above_eye_m"] = round(float(ceiling), 3)
+    facts["manhattan"]["walls"] = corners
+    return dW[path, cols[0]]
+
+
+def _finish(d, ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges, d_obj=None):
+    """Depth [H0, W0] from the horizontal wall distance per column ``d`` [Wk] (metres); ``d_obj`` [Wk]
+    (optional): where the floor ends in front of the wall (objects), used below the horizon when nearer."""
+    lat_f = -np.arctan(h / (d if d_obj is None else np.minimum(d, d_obj)))
     if ceiling is not None:
         lat_c = np.arctan(ceiling / d)
     else:  # outdoors: the sky region around the zenith, its own boundary per column
         lat_c = np.pi / 2 - np.pi * upper_boundary(pc, edges, lat, cfg) / Hk
         lat_c = np.maximum(lat_c, lat_f + np.pi / Hk)  # the sky starts above the ground
-    if ceiling is not None:
-        facts["ceiling_above_eye_m"] = round(float(ceiling), 3)
     cols = (np.arange(W0) + 0.5) * Wk / W0 - 0.5
     lat_f0 = _interp_wrap(lat_f, cols)
     lat_c0 = _interp_wrap(lat_c, cols)

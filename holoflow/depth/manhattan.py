@@ -1,0 +1,177 @@
+"""Manhattan-world room layout on the sphere: horizontal vanishing directions, boundary evidence from
+line segments, and a Manhattan wall fit per column (a DP over walls, not over free distances).
+
+Conventions (docs/conventions.md): world = OpenCV frame of the panorama centre, +y DOWN; a horizontal
+direction at azimuth phi (radians) is (sin phi, 0, cos phi), the equirect longitude of that column.
+The panorama is assumed upright (tilt already corrected, ``vanishing.py``).
+
+- ``segment_rays``: LSD line segments on perspective views looking at the horizon and pitched up and
+  down, as unit end rays [N, 3] on the sphere, great-circle normals and lengths.
+- ``manhattan_yaw``: the Manhattan frame's yaw psi (radians, in [0, pi/2)): the horizontal 3D
+  direction of every non-vertical segment, D = n x up, voted modulo 90 degrees.
+- ``segment_evidence``: per wall family, the equirect rows crossed by segments that run along that
+  family's horizontal direction, below the horizon (floor-wall candidates) and above it (ceiling-wall).
+- ``wall_distances`` / ``manhattan_dp``: a wall with horizontal normal at azimuth alpha and offset a
+  (metres) is seen at horizontal distance a / cos(phi - alpha) in column phi; the DP picks one wall
+  (4 orientations x offsets) per column with a constant penalty per corner, so the layout is a
+  Manhattan polygon (with occlusion jumps allowed) rather than a free per-column distance.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+UP = np.array([0.0, -1.0, 0.0])
+
+
+def segment_rays(srgb8: np.ndarray, pitches_deg=(-40.0, 0.0, 40.0), views: int = 8, size: int = 256,
+                 fov_deg: float = 90.0, min_length: float = 10.0):
+    """Line segments of an 8-bit sRGB panorama [H, W, 3] seen by ``views`` x len(``pitches_deg``)
+    perspective views (degrees, + = looking up). Returns (p1 [N, 3], p2 [N, 3]) unit end rays (world),
+    normals [N, 3] (unit, p1 x p2) and lengths [N] (view pixels)."""
+    import cv2
+    import torch
+
+    from holoflow.geometry.camera import intrinsics_from_fov, look_at
+    from holoflow.geometry.sampling import equirect_to_pinhole
+
+    yaws = np.tile(np.arange(views) * 2 * np.pi / views, len(pitches_deg))
+    pitch = np.repeat(np.radians(np.asarray(pitches_deg, dtype=np.float64)), views)
+    n_v = len(yaws)
+    tg = np.stack([np.sin(yaws) * np.cos(pitch), -np.sin(pitch), np.cos(yaws) * np.cos(pitch)], 1)  # [V, 3]
+    V = torch.stack([look_at(torch.zeros(3, dtype=torch.float64), torch.from_numpy(t)) for t in tg])  # [V, 4, 4]
+    K = intrinsics_from_fov(fov_deg, size, size, dtype=torch.float64)[None].expand(n_v, 3, 3)
+    pano = torch.from_numpy(srgb8.astype(np.float64) / 255.0).permute(2, 0, 1)
+    imgs = equirect_to_pinhole(pano, K, V, size, size).permute(0, 2, 3, 1).numpy()  # [V, s, s, 3]
+    lsd = cv2.createLineSegmentDetector()
+    Kinv = np.linalg.inv(K[0].numpy())
+    P1, P2, L = [], [], []
+    for i in range(n_v):
+        grey = cv2.cvtColor((np.clip(imgs[i], 0, 1) * 255).astype(np.uint8), cv2.COLOR_RGB2GRAY)
+        lines = lsd.detect(grey)[0]
+        if lines is None:
+            continue
+        seg = lines.reshape(-1, 4).astype(np.float64)
+        length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+        seg, length = seg[length >= min_length], length[length >= min_length]
+        if not len(seg):
+            continue
+        R = V[i, :3, :3].numpy()  # world-to-camera; rows of x @ Kinv.T @ R are R^T K^-1 x (world rays)
+        for ends, out in ((seg[:, :2], P1), (seg[:, 2:], P2)):
+            p = np.c_[ends, np.ones(len(seg))] @ Kinv.T @ R
+            out.append(p / np.linalg.norm(p, axis=1, keepdims=True))
+        L.append(length)
+    if not L:
+        z = np.zeros((0, 3))
+        return z, z, z, np.zeros(0)
+    p1, p2, lengths = np.concatenate(P1), np.concatenate(P2), np.concatenate(L)
+    n = np.cross(p1, p2)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    return p1, p2, n, lengths
+
+
+def horizontal_directions(normals: np.ndarray, min_tilt_deg: float = 10.0):
+    """Horizontal 3D direction azimuth (radians) [N] of each segment (D = n x up, a segment of a
+    horizontal 3D line lies on a great circle whose normal is perpendicular to D), and a mask [N] of
+    the segments that can be horizontal lines (great circle not vertical: |n . up| > sin(min_tilt))."""
+    D = np.cross(normals, UP)  # [N, 3], horizontal
+    az = np.arctan2(D[:, 0], D[:, 2])
+    ok = np.abs(normals @ UP) > np.sin(np.radians(min_tilt_deg))
+    return az, ok
+
+
+def manhattan_yaw(normals: np.ndarray, lengths: np.ndarray) -> tuple[float | None, dict]:
+    """Yaw psi in [0, pi/2) (radians) of the horizontal Manhattan directions (psi and psi + 90 deg):
+    the length-weighted mode of the segments' horizontal azimuths modulo 90 degrees (1-degree
+    histogram smoothed over +-3 degrees, refined by the circular mean of 4 x azimuth within +-6
+    degrees); None with fewer than 10 candidate segments. Also facts (support = weight share)."""
+    if len(normals) == 0:
+        return None, {"horizontal_segments": 0}
+    az, ok = horizontal_directions(normals)
+    if ok.sum() < 10:
+        return None, {"horizontal_segments": int(ok.sum())}
+    a = np.mod(az[ok], np.pi / 2)
+    w = lengths[ok]
+    hist = np.bincount(np.minimum((a / (np.pi / 2) * 90).astype(int), 89), weights=w, minlength=90)
+    k = np.exp(-0.5 * (np.arange(-6, 7) / 3.0) ** 2)
+    sm = sum(kk * np.roll(hist, s) for s, kk in zip(range(-6, 7), k))
+    psi0 = (np.argmax(sm) + 0.5) * np.pi / 180
+    diff = np.angle(np.exp(4j * (a - psi0))) / 4  # [-pi/4, pi/4)
+    near = np.abs(diff) < np.radians(6)
+    psi = psi0 + float(np.angle(np.sum(w[near] * np.exp(4j * diff[near])))) / 4 if near.any() else psi0
+    return float(np.mod(psi, np.pi / 2)), {"horizontal_segments": int(ok.sum()),
+                                           "yaw_deg": round(float(np.degrees(np.mod(psi, np.pi / 2))), 2),
+                                           "yaw_support": round(float(w[near].sum() / max(w.sum(), 1e-9)), 3)}
+
+
+def segment_evidence(p1: np.ndarray, p2: np.ndarray, normals: np.ndarray, yaw: float, H: int, W: int,
+                     tol_deg: float = 4.0, horizon_deg: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary evidence maps from Manhattan-horizontal segments: (below [2, H, W], above [2, H, W]),
+    index f = 0 for segments along azimuth ``yaw``, 1 along yaw + 90 degrees. A pixel counts the arc
+    samples of such segments that fall in it (capped at 1 per segment and pixel, map clipped to
+    [0, 1]); ``below`` holds segments whose midpoint is more than ``horizon_deg`` under the horizon,
+    ``above`` those more than ``horizon_deg`` over it."""
+    below = np.zeros((2, H, W))
+    above = np.zeros((2, H, W))
+    if len(normals) == 0:
+        return below, above
+    az, ok = horizontal_directions(normals)
+    rel = np.mod(az - yaw, np.pi / 2)
+    rel = np.minimum(rel, np.pi / 2 - rel)  # angle to the nearest Manhattan direction
+    fam = (np.abs(np.angle(np.exp(2j * (az - yaw)))) > np.pi / 2).astype(int)  # 0: along yaw, 1: along yaw + 90
+    keep = ok & (rel < np.radians(tol_deg))
+    mid = p1 + p2
+    mid /= np.maximum(np.linalg.norm(mid, axis=1, keepdims=True), 1e-12)
+    mid_lat = np.arcsin(np.clip(-mid[:, 1], -1, 1))
+    step = np.pi / H / 2  # half a pixel of arc
+    for i in np.nonzero(keep & (np.abs(mid_lat) > np.radians(horizon_deg)))[0]:
+        ang = float(np.arccos(np.clip(p1[i] @ p2[i], -1, 1)))
+        m = max(2, int(ang / step) + 1)
+        t = np.linspace(0.0, 1.0, m)[:, None]
+        p = p1[i] * (1 - t) + p2[i] * t  # chord samples, normalised: on the great circle between the ends
+        p /= np.linalg.norm(p, axis=1, keepdims=True)
+        lon = np.arctan2(p[:, 0], p[:, 2])
+        lat = np.arcsin(np.clip(-p[:, 1], -1, 1))
+        col = np.mod(((lon + np.pi) / (2 * np.pi) * W).astype(int), W)
+        row = np.clip(((np.pi / 2 - lat) / np.pi * H).astype(int), 0, H - 1)
+        target = below if mid_lat[i] < 0 else above
+        idx = np.unique(row * W + col)
+        target[fam[i]].reshape(-1)[idx] += 1.0  # noqa: the reshape of a C-contiguous slice is a view
+    return np.minimum(below, 1.0), np.minimum(above, 1.0)
+
+
+def wall_distances(yaw: float, offsets: np.ndarray, W: int, dmax: float) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal distance [4 K, W] (metres, clipped to ``dmax``) of each wall state in each column
+    and its validity [4 K, W]. State s = o K + k: a wall with horizontal normal at azimuth
+    yaw + o 90 degrees, ``offsets[k]`` metres from the eye (offsets [K] ascending). A wall is valid in
+    the columns that face it (cos(phi - alpha) > 0.02) and where it is nearer than 1.5 dmax."""
+    phi = (np.arange(W) + 0.5) / W * 2 * np.pi - np.pi  # [W] column azimuths (longitude)
+    alpha = yaw + np.arange(4) * np.pi / 2  # [4]
+    cosd = np.cos(phi[None, :] - alpha[:, None])  # [4, W]
+    d = offsets[None, :, None] / np.maximum(cosd[:, None, :], 1e-6)  # [4, K, W]
+    valid = (cosd[:, None, :] > 0.02) & (d < 1.5 * dmax)
+    K = len(offsets)
+    return np.minimum(d, dmax).reshape(4 * K, W), valid.reshape(4 * K, W)
+
+
+def manhattan_dp(cost: np.ndarray, corner: float) -> np.ndarray:
+    """One state per column [W] minimising sum of ``cost`` [S, W] + ``corner`` x (number of state
+    changes between neighbouring columns); columns wrap (solved over the panorama extended by a
+    quarter turn on both sides, the middle kept)."""
+    S, W = cost.shape
+    pad = min(W, max(1, W // 4))
+    ext = np.concatenate([cost[:, -pad:], cost, cost[:, :pad]], axis=1)  # [S, W + 2 pad]
+    n = ext.shape[1]
+    acc = ext[:, 0].copy()
+    stay = np.zeros((n, S), dtype=bool)  # True: came from the same state; else from the best one
+    best = np.zeros(n, dtype=np.int64)
+    for c in range(1, n):
+        b = int(np.argmin(acc))
+        best[c] = b
+        sw = acc[b] + corner
+        stay[c] = acc <= sw
+        acc = np.where(stay[c], acc, sw) + ext[:, c]
+    path = np.empty(n, dtype=np.int64)
+    path[-1] = int(np.argmin(acc))
+    for c in range(n - 1, 0, -1):
+        path[c - 1] = path[c] if stay[c, path[c]] else best[c]
+    return path[pad:pad + W]
