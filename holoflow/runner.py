@@ -479,8 +479,7 @@ class _Scheduler:
         seconds = time.monotonic() - st.t0[name]
         self.display.end_step(st.name(name), self.done, self.total, entry["how"], seconds if ran else 0.0, note)
         entry["seconds"] = round(seconds, 3)
-        entry["engine"] = st.ctx.resolved[name].engine if entry["how"] != "used" else "used"
-        entry["device"] = st.ctx.device if ran else _made_on(st.ctx.store, entry.get("key"))
+        entry["engine"], entry["device"] = _made_with(st.ctx.store, entry.get("key"), st.ctx.resolved[name].engine)
         entry["outputs"] = {k: v["digest"] for k, v in st.outputs[name].items()}
         st.summary["stages"][name] = entry
         if st.run_id is not None:
@@ -488,10 +487,17 @@ class _Scheduler:
             _write_run(st, latest=len(self.states) == 1)      # a killed run keeps what it finished
 
 
-def _made_on(store: Store, key: str | None) -> str | None:
-    """The device a cached step's record says it ran on (None for used files)."""
+def _made_with(store: Store, key: str | None, engine: str) -> tuple[str, str | None]:
+    """(engine, device) a step's record says made its outputs: the engine the step chose itself when it
+    resolved one (a depth stage's ``auto``), else ``engine``; (``used``, None) for a used file."""
     rec = store.record(key) if key else None
-    return rec["provenance"].get("device") if rec else None
+    if rec is None:
+        return ("used", None) if key is None else (engine, None)
+    prov = rec["provenance"]
+    chosen = prov.get("meta", {}).get("engine")
+    if isinstance(chosen, dict) and chosen.get("engine"):
+        engine = chosen["engine"]
+    return engine, prov.get("device")
 
 
 def _finish_run(st: _SceneRun, latest: bool) -> None:
