@@ -62,7 +62,7 @@ def needs(resolved: dict[str, "Resolved"]) -> list[ModelNeed]:
     out = []
     for name, r in resolved.items():
         for param, role in ENGINE_MODELS.get(r.engine, []):
-            model = str(r.params.get(param, ""))
+            model = str(r.params[param])
             try:
                 path, present = str(resolve(model, role, f"{name}.{param}")), True
             except MissingWeights as e:
@@ -108,7 +108,7 @@ def apply_manifest(resolved: dict[str, "Resolved"], folder: Path) -> None:
         raise PipelineError(str(e)) from None
     for name, r in resolved.items():
         for param, role in ENGINE_MODELS.get(r.engine, []):
-            if r.params.get(param):
+            if r.params[param]:
                 continue
             if role not in roles:
                 raise PipelineError(f"--models {folder}: {MANIFEST} has no '{role}' (needed by {name}.{param}, "
