@@ -62,17 +62,17 @@ def resize_radial(radial: np.ndarray, height: int, width: int) -> np.ndarray:
     return radial[rows[:, None], cols[None, :]]
 
 
-def sample_faces(pano: np.ndarray, K, viewmat, size: int, mode: str = "bilinear") -> np.ndarray:
-    """Perspective faces [F, size, size, C] of an equirect image [H, W, C] (or [H, W])."""
-    import torch
-
+def sample_faces(pano: np.ndarray, K, viewmat, size: int, mode: str = "bilinear", device: str = "cpu"
+                 ) -> np.ndarray:
+    """Perspective faces [F, size, size, C] of an equirect image [H, W, C] (or [H, W]), resampled on
+    ``device`` in float64."""
     from holoflow.geometry.sampling import equirect_to_pinhole
 
     img = np.asarray(pano, dtype=np.float64)
     img = img[..., None] if img.ndim == 2 else img
-    t = torch.from_numpy(np.ascontiguousarray(img)).permute(2, 0, 1)
-    out = equirect_to_pinhole(t, _t(K), _t(viewmat), size, size, mode=mode)  # [F, C, s, s]
-    return out.permute(0, 2, 3, 1).numpy()
+    t = _t(img, device).permute(2, 0, 1)
+    out = equirect_to_pinhole(t, _t(K, device), _t(viewmat, device), size, size, mode=mode)  # [F, C, s, s]
+    return out.permute(0, 2, 3, 1).cpu().numpy()
 
 
 def sample_radial(radial: np.ndarray, K, viewmat, size: int) -> np.ndarray:
@@ -96,7 +96,7 @@ def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, 
     size = cfg.face_size
     faces = icosahedron_faces(size, cfg.padding)
     K, V = _np(faces.K), _np(faces.viewmat)
-    images = sample_faces(pano, K, V, size).astype(np.float32)  # [F, h, w, 3]
+    images = sample_faces(pano, K, V, size, device=device).astype(np.float32)  # [F, h, w, 3]
     dirs, cos = face_rays(K, V, size, size)
     truth_faces = sample_radial(truth, K, V, size) if truth is not None else None
     raw, meta = _engine(TangentDepthParams, engine, "relative")(images, dirs, cos, truth_faces, seed, cfg, device,
@@ -109,20 +109,21 @@ def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, 
     al = align_faces(raw, np.isfinite(raw), cos, overlaps, cfg)
     from holoflow.geometry.icosahedron import frustum_weight
 
-    disparity = blend_faces(al.radial, _np(frustum_weight(faces, cfg.blend_ramp)), K, V, H, W)
+    disparity = blend_faces(al.radial, _np(frustum_weight(faces, cfg.blend_ramp)), K, V, H, W, device)
     return TangentDepth(disparity.astype(np.float32), raw.astype(np.float32), al.radial.astype(np.float32),
                         al, meta)
 
 
-def blend_faces(radial: np.ndarray, weights: np.ndarray, K, viewmat, H: int, W: int) -> np.ndarray:
-    """Frustum blending: per-face radial disparity [F, h, w] (NaN = invalid) -> equirect [H, W].
+def blend_faces(radial: np.ndarray, weights: np.ndarray, K, viewmat, H: int, W: int, device: str = "cpu"
+                ) -> np.ndarray:
+    """Frustum blending: per-face radial disparity [F, h, w] (NaN = invalid) -> equirect [H, W]
+    (the projection runs on ``device`` in float64).
 
     ``weights`` [F, h, w] frustum weights; invalid pixels get weight 0 (and their neighbours' values, so
     bilinear taps at a face's valid border do not mix in a fill value). Equirect pixels no valid face
     covers take the nearest covered pixel (wrap-aware). Raises ValueError when no face is valid.
     """
     import scipy.ndimage as ndi
-    import torch
 
     from holoflow.geometry.sampling import pinhole_to_equirect
 
@@ -137,9 +138,9 @@ def blend_faces(radial: np.ndarray, weights: np.ndarray, K, viewmat, H: int, W: 
             idx = ndi.distance_transform_edt(~ok[f], return_distances=False, return_indices=True)
             filled[f] = radial[f][tuple(idx)]
     wt = np.where(ok, weights, 0.0)
-    accum, wsum = pinhole_to_equirect(torch.from_numpy(filled[:, None]), _t(K), _t(viewmat), H, W,
-                                      weights=torch.from_numpy(wt[:, None]))
-    accum, wsum = accum[0].numpy(), wsum[0].numpy()
+    accum, wsum = pinhole_to_equirect(_t(filled[:, None], device), _t(K, device), _t(viewmat, device), H, W,
+                                      weights=_t(wt[:, None], device))
+    accum, wsum = accum[0].cpu().numpy(), wsum[0].cpu().numpy()
     covered = wsum > 1e-12
     out = np.where(covered, accum / np.where(covered, wsum, 1.0), np.nan)
     if not covered.all():
@@ -173,7 +174,7 @@ def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.nda
     faces = icosahedron_faces(size, cfg.padding)
     chosen = sorted(int(i) for i in np.random.default_rng([seed, 1]).choice(20, cfg.faces, replace=False))
     K, V = _np(faces.K)[chosen], _np(faces.viewmat)[chosen]
-    images = sample_faces(pano, K, V, size).astype(np.float32)
+    images = sample_faces(pano, K, V, size, device=device).astype(np.float32)
     dirs, cos = face_rays(K, V, size, size)
     truth_faces = sample_radial(truth, K, V, size) if truth is not None else None
     z, meta = _engine(MetricAlignParams, engine, "metric")(images, dirs, cos, truth_faces, [seed, 2], cfg, device,
@@ -181,7 +182,7 @@ def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.nda
     meta = {**meta, "why": why}
     z = np.asarray(z, dtype=np.float64)
     ref = np.where(np.isfinite(z) & (z > 0), cos / np.where(z > 0, z, 1.0), np.nan)  # radial disparity
-    x = sample_faces(disparity, K, V, size)[..., 0]
+    x = sample_faces(disparity, K, V, size, device=device)[..., 0]
     fit = robust_affine_fit(x, ref, huber=cfg.huber)
     if not fit["scale"] > 0:
         raise ValueError(f"metric alignment gave a non-positive scale ({fit['scale']:.3g}): the relative "
@@ -215,7 +216,7 @@ def _np(x) -> np.ndarray:
     return x.detach().cpu().numpy().astype(np.float64) if hasattr(x, "detach") else np.asarray(x, np.float64)
 
 
-def _t(x):
+def _t(x, device: str = "cpu"):
     import torch
 
-    return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64))
+    return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64)).to(device)

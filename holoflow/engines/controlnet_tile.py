@@ -8,7 +8,8 @@ ControlNet its refinement uses).
 Tiling wraps in longitude: tile columns are evenly spaced around the full circle and a tile may
 run past column W-1 into column 0, so the seam is inside tiles, never on a tile border; results
 are feather-blended (linear ramps over the overlap) and accumulated modulo W. Rows are evenly
-spaced from the top to the bottom edge. Tile ``i`` is denoised with seed ``seed + i``.
+spaced from the top to the bottom edge. Tile ``i`` (row-major) is denoised with seed ``seed + i``, alone
+or ``batch`` tiles per pipeline call.
 """
 from __future__ import annotations
 
@@ -51,11 +52,12 @@ def _ramp(n: int, overlap: int, lo: bool, hi: bool) -> np.ndarray:
 
 def refine(pano: np.ndarray, prompt: str, width: int = 6144, height: int = 3072, strength: float = 0.5,
            tile: int = 512, overlap: int = 64, steps: int = 20, seed: int = 0, model: str = "",
-           controlnet: str = "", device: str = "cpu", progress: Progress = None, *, guidance: float = 7.5,
-           negative_prompt: str = NEGATIVE_PROMPT, scheduler: str = "unipc") -> np.ndarray:
+           controlnet: str = "", device: str = "cpu", progress: Progress = None, *, batch: int = 1,
+           guidance: float = 7.5, negative_prompt: str = NEGATIVE_PROMPT, scheduler: str = "unipc") -> np.ndarray:
     """Refined panorama, linear RGB ``[height, width, 3]`` (the input is first resized to that).
 
-    strength: img2img denoising strength in [0, 1] (0 returns the resized input).
+    strength: img2img denoising strength in [0, 1] (0 returns the resized input); batch: tiles denoised
+    together (each keeps its own seed; batching changes only float rounding).
     """
     import torch
 
@@ -72,21 +74,23 @@ def refine(pano: np.ndarray, prompt: str, width: int = 6144, height: int = 3072,
     acc = np.zeros((3, height, width + tw), np.float64)                     # unwrapped, folded at the end
     wsum = np.zeros((height, width + tw), np.float64)
     wrapped = torch.cat([img, img[..., :tw]], dim=-1)                        # [3, H, W + tw]
-    n = len(xs) * len(ys)
-    for ty, y0 in enumerate(ys):
-        wy = _ramp(th, overlap, lo=ty > 0, hi=ty < len(ys) - 1)
-        for tx, x0 in enumerate(xs):
-            i = ty * len(xs) + tx
-            report(progress, i, n, "tiles")
-            crop = wrapped[None, :, y0:y0 + th, x0:x0 + tw].to(dev, pipe.unet.dtype)  # [1, 3, th, tw]
-            with torch.inference_mode():
-                out = pipe(prompt=prompt, negative_prompt=negative_prompt, image=crop, control_image=crop,
-                           height=th, width=tw, strength=float(strength), num_inference_steps=steps,
-                           guidance_scale=guidance, generator=torch.Generator("cpu").manual_seed(seed + i),
-                           output_type="pt").images                           # [1, 3, th, tw] in [0, 1]
-            wx = _ramp(tw, overlap, lo=True, hi=True)
-            wt = wy[:, None] * wx[None, :]
-            acc[:, y0:y0 + th, x0:x0 + tw] += out[0].float().cpu().numpy() * wt
+    tiles = [(ty, y0, x0) for ty, y0 in enumerate(ys) for x0 in xs]  # tile i = tiles[i], seed + i
+    n = len(tiles)
+    wx = _ramp(tw, overlap, lo=True, hi=True)
+    for start in range(0, n, batch):
+        report(progress, start, n, "tiles")
+        group = range(start, min(start + batch, n))
+        crops = torch.cat([wrapped[None, :, tiles[i][1]:tiles[i][1] + th, tiles[i][2]:tiles[i][2] + tw]
+                           for i in group]).to(dev, pipe.unet.dtype)     # [b, 3, th, tw]
+        with torch.inference_mode():
+            out = pipe(prompt=[prompt] * len(group), negative_prompt=[negative_prompt] * len(group), image=crops,
+                       control_image=crops, height=th, width=tw, strength=float(strength),
+                       num_inference_steps=steps, guidance_scale=guidance, output_type="pt",
+                       generator=[torch.Generator("cpu").manual_seed(seed + i) for i in group]).images
+        for k, i in enumerate(group):                                    # out [b, 3, th, tw] in [0, 1]
+            ty, y0, x0 = tiles[i]
+            wt = _ramp(th, overlap, lo=ty > 0, hi=ty < len(ys) - 1)[:, None] * wx[None, :]
+            acc[:, y0:y0 + th, x0:x0 + tw] += out[k].float().cpu().numpy() * wt
             wsum[y0:y0 + th, x0:x0 + tw] += wt
     acc[:, :, :tw] += acc[:, :, width:]
     wsum[:, :tw] += wsum[:, width:]
@@ -98,5 +102,5 @@ def refine(pano: np.ndarray, prompt: str, width: int = 6144, height: int = 3072,
 def detail_engine(pano: np.ndarray, prompt: str, cfg, seed: int, device: str, progress: Progress):
     """detail's ``controlnet_tile`` engine (holoflow.imageops.config.DetailParams): (pano, meta)."""
     out = refine(pano, prompt, cfg.width, cfg.height, cfg.strength, cfg.tile, cfg.overlap, cfg.steps, seed,
-                 cfg.model, cfg.controlnet, device, progress)
+                 cfg.model, cfg.controlnet, device, progress, batch=cfg.batch)
     return out, {"model": cfg.model or "default", "controlnet": cfg.controlnet or "default"}

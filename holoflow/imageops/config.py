@@ -62,3 +62,4 @@ class DetailParams(StageParams):
     tile: int = param(512, "controlnet_tile: tile side", "px", ge=1)
     overlap: int = param(64, "controlnet_tile: tile overlap", "px", ge=0)
     steps: int = param(20, "controlnet_tile: denoising steps", ge=1)
+    batch: int = param(1, "controlnet_tile: tiles per pipeline call (each keeps its seed; only rounding changes)", ge=1)

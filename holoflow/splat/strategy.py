@@ -42,11 +42,12 @@ class DefaultStrategy:
         if it >= self.cfg.densify_until or means2d.grad is None:
             return
         r = radii[0].float()                                                        # [N]
-        vis = r > 0
-        g = means2d.grad[0] * means2d.new_tensor([width / 2, height / 2])           # [N, 2] NDC units
-        self.state["grad"][vis] += g[vis].norm(dim=-1)
-        self.state["count"][vis] += 1
-        self.state["radii"][vis] = torch.maximum(self.state["radii"][vis], r[vis])
+        vis = r > 0                                                                 # masks, not indices: no sync
+        g = (means2d.grad[0] * means2d.new_tensor([width / 2, height / 2])).norm(dim=-1)  # [N] NDC units
+        st = self.state
+        st["grad"] += torch.where(vis, g, 0.0)
+        st["count"] += vis
+        st["radii"] = torch.where(vis, torch.maximum(st["radii"], r), st["radii"])
 
     @torch.no_grad()
     def step_post_optimizer(self, model: GaussianModel, opt: torch.optim.Adam, it: int) -> dict | None:

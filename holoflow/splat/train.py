@@ -129,9 +129,10 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
     strategy = DefaultStrategy(cfg, extent, centroid, gen)
     strategy.initialize_state(n, dev)
     bg = torch.tensor(cfg.background, dtype=torch.float32, device=dev)
-    log = dict(config=asdict(cfg), seed=seed, extent=extent, initial_count=n, loss=[], count=[],
+    log = dict(config=asdict(cfg), seed=seed, extent=extent, initial_count=n, count=[],
                densify=[], notes=[])
     order: list[int] = []
+    losses: list[torch.Tensor] = []                                 # read back once at the end: no sync per step
     on_dev = _views_on(views, dev)                                  # images, masks, Ks moved once
     t0 = time.perf_counter()
     for it in range(1, cfg.iterations + 1):
@@ -153,7 +154,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
         mask = v.get("mask")
         loss = masked_loss(out["rgb"][0], image, mask, cfg.lambda_dssim)
         loss.backward()
-        log["loss"].append(float(loss.detach()))
+        losses.append(loss.detach())
         strategy.step_pre_optimizer(it, means2d, out["meta"]["radii"], W, H)
         with torch.no_grad():
             opt.step()
@@ -166,6 +167,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
         log["count"].append(len(model))
         if progress is not None:
             progress(it, cfg.iterations)
+    log["loss"] = torch.stack(losses).tolist()
     log["time_s"] = time.perf_counter() - t0
     log["final_count"] = len(model)
     return log

@@ -107,6 +107,10 @@ def test_refine(tiny_sd, base_image):
     others = [refine(base_image, "detailed", 64, 32, strength=0.5, tile=32, overlap=8, steps=2, seed=s,
                      model=str(sd), controlnet=str(cnet)) for s in (1, 2)]
     assert seam_is_typical(a, *others)
+    batched = refine(base_image, "detailed", 64, 32, strength=0.5, tile=32, overlap=8, steps=2, seed=0,
+                     model=str(sd), controlnet=str(cnet), batch=3)  # 3 tiles, then the rest
+    assert np.abs(batched - a).max() < 1e-4                # each tile keeps its seed; rounding only
+    assert np.abs(others[0] - a).max() > 1e-2
     same = refine(base_image, "detailed", 64, 32, strength=0.0, tile=32, overlap=8, steps=2, seed=0,
                   model="/nonexistent", controlnet="/nonexistent")
     assert np.allclose(same, base_image, atol=1e-5)        # strength 0: no model needed, input back
