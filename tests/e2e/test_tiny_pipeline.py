@@ -3,32 +3,11 @@
 Two runs into two separate stores must produce byte-identical artifacts (every random choice is
 seeded), a rerun must be fully cached, and the final scene must be a readable 3DGS PLY.
 """
-import json
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-PROMPT = "a small wooden cabin"
 STAGES = ["base_pano", "stylize", "upscale", "detail", "tangent_depth", "metric_align", "point_cloud",
           "pcd_set", "pano_set", "pre_opt", "inp_set", "transfer_opt", "export"]
-
-
-def holoflow_run(store: Path, *extra: str) -> dict:
-    cmd = [sys.executable, "-m", "holoflow", "run", PROMPT, "--pipeline", str(ROOT / "pipeline.yaml"),
-           "--profile", "tiny", "--store", str(store), "--json", *extra]
-    done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout)
-
-
-@pytest.fixture(scope="module")
-def two_runs(tmp_path_factory):
-    base = tmp_path_factory.mktemp("e2e")
-    return base / "a", holoflow_run(base / "a"), holoflow_run(base / "b")
 
 
 def test_every_stage_ran(two_runs):
@@ -42,9 +21,9 @@ def test_two_stores_give_byte_identical_artifacts(two_runs):
         assert first["stages"][name]["outputs"] == second["stages"][name]["outputs"], name
 
 
-def test_rerun_is_fully_cached(two_runs):
+def test_rerun_is_fully_cached(two_runs, tiny_run):
     store, _, _ = two_runs
-    again = holoflow_run(store)
+    again = tiny_run(store)
     assert {s["how"] for s in again["stages"].values()} == {"cached"}
 
 
