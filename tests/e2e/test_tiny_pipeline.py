@@ -49,6 +49,7 @@ def test_exports_are_written_and_render_like_the_scene(two_runs):
     import torch
 
     trimesh = pytest.importorskip("trimesh")
+    from holoflow.bench.exports import read_splat
     from holoflow.metrics import psnr
     from holoflow.recon.views import load_view_set, stack_cameras
     from holoflow.splat.model import GaussianModel
@@ -67,12 +68,8 @@ def test_exports_are_written_and_render_like_the_scene(two_runs):
     model = GaussianModel.load_ply(run / "transfer_opt" / "scene.ply")
     with torch.no_grad():
         ply_rgb = render(model, viewmats, Ks, W, H, backend="cpu")["rgb"]
-    rec = np.frombuffer((run / "export" / "scene.splat").read_bytes(),
-                        [("p", "<f4", 3), ("s", "<f4", 3), ("c", "u1", 4), ("q", "u1", 4)])
-    q = (rec["q"].astype(np.float32) - 128) / 128
-    splat_rgb = rasterize(torch.from_numpy(rec["p"].copy()), torch.from_numpy(q), torch.from_numpy(rec["s"].copy()),
-                          torch.from_numpy(rec["c"][:, 3] / np.float32(255)),
-                          torch.from_numpy(rec["c"][:, :3] / np.float32(255)), viewmats, Ks, W, H,
+    a = {k: torch.from_numpy(v) for k, v in read_splat(run / "export" / "scene.splat").items()}
+    splat_rgb = rasterize(a["means"], a["quats"], a["scales"], a["opacities"], a["rgb"], viewmats, Ks, W, H,
                           backend="cpu")["rgb"]
     p_ply = float(psnr(ply_rgb.clamp(0, 1), target))
     p_splat = float(psnr(splat_rgb.clamp(0, 1), target))
