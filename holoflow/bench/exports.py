@@ -44,21 +44,16 @@ def read_gsply(path: Path, rub: bool) -> dict:
                 rgb=0.5 + 0.28209479177387814 * sh0)
 
 
-def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="holoflow bench exports", description=__doc__.splitlines()[0])
-    ap.add_argument("run", nargs="?", default="latest", help="run id, or 'latest' (default)")
-    ap.add_argument("--store", default=os.environ.get("HOLOFLOW_STORE", "artifacts"), help="store folder")
-    args = ap.parse_args(argv)
+def fidelity(run: Path) -> list[tuple[str, int, float, float]]:
+    """(file, Gaussians, PSNR vs the PANO set, PSNR vs the scene.ply render) for scene.ply and each
+    splat export of the run folder ``run`` (module docstring); dB."""
     import torch
-    import trimesh
 
     from holoflow.metrics import psnr
     from holoflow.recon.views import load_view_set, stack_cameras
     from holoflow.splat.model import GaussianModel
     from holoflow.splat.rasterize import rasterize, render
 
-    run = Path(args.store) / ("latest" if args.run == "latest" else f"runs/{args.run}")
-    out = run / "export"
     views, _ = load_view_set(run / "pano_set", alpha_is_mask=False)
     viewmats, Ks = stack_cameras(views)
     target = torch.stack([v["image"] for v in views])                        # [C, H, W, 3] sRGB
@@ -66,15 +61,28 @@ def main(argv: list[str]) -> int:
     model = GaussianModel.load_ply(run / "transfer_opt" / "scene.ply")
     with torch.no_grad():
         ply = render(model, viewmats, Ks, W, H, backend="cpu")["rgb"].clamp(0, 1)
-    rows = [("scene.ply (holoflow)", len(model.means), psnr(ply, target), float("inf"))]
+    rows = [("scene.ply", len(model.means), psnr(ply, target), float("inf"))]
     for name, reader in (("scene.splat", read_splat), ("scene.spz", lambda p: read_gsply(p, True)),
                          ("scene.compressed.ply", lambda p: read_gsply(p, False))):
-        a = {k: torch.from_numpy(np.ascontiguousarray(v, np.float32)) for k, v in reader(out / name).items()}
+        a = {k: torch.from_numpy(np.ascontiguousarray(v, np.float32)) for k, v in reader(run / "export" / name).items()}
         rgb = rasterize(a["means"], a["quats"], a["scales"], a["opacities"], a["rgb"], viewmats, Ks, W, H,
                         backend="cpu")["rgb"].clamp(0, 1)
         rows.append((name, len(a["means"]), psnr(rgb, target), psnr(rgb, ply)))
-    mesh = trimesh.load(str(out / "mesh.glb"), force="mesh", process=False)
-    print(f"Run {run.resolve().name}: {len(views)} PANO-set views at {W} x {H}; {machine()}; load {load()}\n")
+    return rows
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(prog="holoflow bench exports", description=__doc__.splitlines()[0])
+    ap.add_argument("run", nargs="?", default="latest", help="run id, or 'latest' (default)")
+    ap.add_argument("--store", default=os.environ.get("HOLOFLOW_STORE", "artifacts"), help="store folder")
+    args = ap.parse_args(argv)
+    import trimesh
+
+    run = Path(args.store) / ("latest" if args.run == "latest" else f"runs/{args.run}")
+    rows = fidelity(run)
+    mesh = trimesh.load(str(run / "export" / "mesh.glb"), force="mesh", process=False)
+    cams = (run / "pano_set" / "cameras.json").read_text()
+    print(f"Run {run.resolve().name} ({cams.count('viewmat')} PANO-set views); {machine()}; load {load()}\n")
     print("| file | Gaussians | PSNR vs PANO set (dB) | PSNR vs scene.ply render (dB) |\n|---|---|---|---|")
     for name, n, p_set, p_ply in rows:
         print(f"| {name} | {n} | {p_set:.2f} | {p_ply:.1f} |")
