@@ -1,6 +1,8 @@
 """`holoflow view` without a browser: what it opens, the splat arrays it hands viser, and the one-line
 errors (not a scene, port in use). The browser test is tests/e2e/test_view_browser.py."""
 import socket
+from contextlib import contextmanager
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -73,3 +75,23 @@ def test_port_in_use_is_one_line(tmp_path, capsys):
         assert view.main([str(_scene(tmp_path / "s.ply")), "--port", str(port)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"port {port} on 127.0.0.1 is in use" in err, err
+
+
+def test_look_around_turns_once_level_from_the_centre():
+    class Client:
+        """Records the camera after each atomic update, as viser's client handle would send it."""
+        def __init__(self):
+            self.camera, self.frames = SimpleNamespace(), []
+
+        @contextmanager
+        def atomic(self):
+            yield
+            self.frames.append((self.camera.position, self.camera.look_at, self.camera.up_direction))
+
+    client = Client()
+    view.look_around(client, seconds=0.0, steps=8)
+    assert len(client.frames) == 9
+    assert all(pos == (0, 0, 0) and up == (0, -1, 0) and at[1] == 0 for pos, at, up in client.frames)
+    looks = np.array([at for _, at, _ in client.frames])
+    np.testing.assert_allclose(looks[[0, 2, 4, 6, 8]], [[0, 0, 1], [1, 0, 0], [0, 0, -1], [-1, 0, 0], [0, 0, 1]],
+                               atol=1e-12)                          # forward, right (+x), back, left, forward
