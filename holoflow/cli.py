@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 DISPATCH = {"eval": "holoflow.eval", "report": "holoflow.report", "models": "holoflow.models",
-            "params": "holoflow.paramdocs"}
+            "params": "holoflow.paramdocs", "view": "holoflow.view"}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -152,6 +152,7 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("bench", help="holoflow bench NAME [ARGS]: run holoflow.bench.NAME (e.g. cache)")
     sub.add_parser("eval", help="holoflow eval ...: accuracy against procedural ground truth")
     sub.add_parser("report", help="holoflow report ...: a run's report")
+    sub.add_parser("view", help="holoflow view [RUN | STAGE | FILE.ply]: look around the scene in the browser (viser)")
     sub.add_parser("models", help="holoflow models list|random ...: the real engines' weights")
     sub.add_parser("params", help="holoflow params [STAGE] [--markdown]: each stage's params (type, default, range)")
     return p

@@ -39,7 +39,7 @@ def test_quick_sweep_reuses_upstream_and_resumes(tmp_path):
     assert acc.main(argv) == 0
     rows = list(csv.DictReader(open(out)))
     assert [r["point"] for r in rows] == ["base", "iters-x0.5"]
-    assert set(rows[1]["ran"].split()) == {"pre_opt", "inp_set", "transfer_opt"}   # upstream served from the store
+    assert set(rows[1]["ran"].split()) == {"pre_opt", "inp_set", "transfer_opt", "export"}   # upstream from the store
     for name in ("base_pano", "tangent_depth", "pano_set"):                       # same records, same costs
         assert rows[0][f"{name}_s"] == rows[1][f"{name}_s"] and float(rows[0][f"{name}_s"]) > 0
     for r in rows:

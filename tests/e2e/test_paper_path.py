@@ -45,7 +45,7 @@ def run_paper_tiny(models: Path, store: Path, device: str) -> dict:
 
 def check_summary(summary: dict, device: str, splat_engine: str) -> None:
     stages = summary["stages"]
-    assert len(stages) == 12 and {s["how"] for s in stages.values()} == {"ran"}
+    assert len(stages) == 13 and {s["how"] for s in stages.values()} == {"ran"}
     assert {n: stages[n]["engine"] for n in REAL} == REAL
     assert stages["pre_opt"]["engine"] == stages["transfer_opt"]["engine"] == splat_engine
     assert {s["device"] for s in stages.values()} == {device}

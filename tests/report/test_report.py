@@ -99,7 +99,7 @@ def test_full_run_report(runs, tmp_path):
 def test_partial_run_shows_not_run(runs, tmp_path):
     store, partial, full = runs
     html = _report(store, partial, tmp_path / "partial.html")
-    assert html.count('<span class="badge notrun">not run</span>') == 2 * 8   # table row + heading, 8 stages
+    assert html.count('<span class="badge notrun">not run</span>') == 2 * 9   # table row + heading, 9 stages (export too)
     assert html.count('<span class="badge cached">cached</span>') == 2 * len(PANOS)
     assert html.count("<td>this run</td>") == 0 and html.count(f"<td>{full}</td>") == len(PANOS)
     titles = _img_titles(html)
