@@ -30,7 +30,8 @@ def test_report_formats_inf_nan_and_marks_unavailable_metrics():
     r = {"G0": {"gaussians": 10, "base": row, "supp": nan, "novel": nan},
          "G1": {"gaussians": 12, "base": row, "supp": row, "novel": row}, "seconds": 3.0}
     r = dict(r, repeats=[r])
-    args = argparse.Namespace(profile="eval", seed=0, novel=2, supp=2, offset=0.3, backend="cpu", repeats=1)
+    args = argparse.Namespace(profile="eval", seed=0, novel=2, supp=2, offset=0.3, backend="cpu", repeats=1,
+                              nr_size=512)
     md = heval.markdown({"a room": {"full": r, "no_inp": r}}, args, {"lpips": "unavailable: x"}, "2-core CPU")
     assert "| a room | G1 | 12 | inf |" in md
     assert "lpips: unavailable" in md and "no_inp (n=1)" in md
