@@ -61,3 +61,24 @@ def test_scene_is_a_standard_3dgs_ply(two_runs):
     assert vertex.count > 100
     xyz = np.stack([vertex["x"], vertex["y"], vertex["z"]], 1)
     assert np.isfinite(xyz).all()
+
+
+def test_eval_run_gives_truth_free_scores_of_the_finished_run(two_runs, tmp_path):
+    """`holoflow eval --run latest`: base PSNR / SSIM against the PANO set and finite NIQE / BRISQUE
+    at the supplementary cameras for G0 and G1, the depth engines, the paper's values beside."""
+    store, _, _ = two_runs
+    out = tmp_path / "nr.json"
+    cmd = [sys.executable, "-m", "holoflow", "eval", "--run", "latest", "--store", str(store), "--supp", "3",
+           "--nr-size", "192", "--json", str(out)]
+    done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    r = json.loads(out.read_text())
+    assert r["run"] == (store / "latest").readlink().name and r["engines"]["tangent_depth"] == "auto -> simulated"
+    for tag in ("G0", "G1"):
+        nr = r[tag]["supp_nr"]
+        assert (nr["cameras"], nr["size"]) == (3, 192)
+        assert all(np.isfinite(v) for v in (nr["niqe"], nr["brisque"], r[tag]["base"]["psnr"], r[tag]["base"]["ssim"]))
+    assert "5.372" in done.stdout and "32.372" in done.stdout and "tangent_depth=auto -> simulated" in done.stdout
+    bad = subprocess.run(cmd[:5] + ["no-such-run", "--store", str(store)], cwd=ROOT, capture_output=True, text=True,
+                         timeout=600)
+    assert bad.returncode == 2 and "no finished run 'no-such-run'" in bad.stderr
