@@ -431,16 +431,17 @@ def paper_tables(results: dict) -> list[str]:
         lines.append(f"| holoflow (full, n={sum('full' in per for per in results.values())}) | "
                      f"{_fmt(mean('full', 'base', 'psnr'))} | {_fmt(mean('full', 'base', 'ssim'))} | unavailable | "
                      f"{_fmt(mean('full', 'supp_nr', 'niqe'))} | {_fmt(mean('full', 'supp_nr', 'brisque'))} |")
-    lines += [f"| paper (Ours) | {t2['psnr']} | {t2['ssim']} | {t2['lpips']} | {t2['niqe']} | {t2['brisque']} |", "",
+    lines += [f"| paper (Ours) | {t2['psnr']:.3f} | {t2['ssim']:.3f} | {t2['lpips']:.3f} | {t2['niqe']:.3f} | "
+              f"{t2['brisque']:.3f} |", "",
               "## Table III ablations (G1 at the supplementary cameras, mean over scenes)", "",
               "| paper row | variant | NIQE | paper NIQE | BRISQUE | paper BRISQUE | TReS ours / paper | "
               "MANIQA ours / paper |", "|---|---|---|---|---|---|---|---|"]
     for variant, (row, niqe, bris, tres, maniqa) in PAPER_TABLE3.items():
         n = sum(variant in per for per in results.values())
         if n:
-            lines.append(f"| {row} | {variant} (n={n}) | {_fmt(mean(variant, 'supp_nr', 'niqe'))} | {niqe} | "
-                         f"{_fmt(mean(variant, 'supp_nr', 'brisque'))} | {bris} | unavailable / {tres} | "
-                         f"unavailable / {maniqa} |")
+            lines.append(f"| {row} | {variant} (n={n}) | {_fmt(mean(variant, 'supp_nr', 'niqe'))} | {niqe:.3f} | "
+                         f"{_fmt(mean(variant, 'supp_nr', 'brisque'))} | {bris:.3f} | unavailable / {tres:.3f} | "
+                         f"unavailable / {maniqa:.3f} |")
     return lines + [""]
 
 
