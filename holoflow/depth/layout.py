@@ -93,6 +93,11 @@ class LayoutConfig:
     ceiling_prior: float = 2.0
     """weight per column of the log-normal prior (sigma 0.5 in log metres) on the ceiling height
     around typical_ceiling (Manhattan fit only)."""
+    region_cap: float = 10.0
+    """Manhattan fit: a column's floor / ceiling row cost counts at most this much above its own best
+    row (row-cost units, about rows of mislabelled pixels), so a column where furniture, a window or
+    a same-coloured wall contradicts every wall hypothesis cannot outvote the rest (a truncated,
+    robust data term). 0 = no cap."""
     segment_weight: float = 20.0
     """weight of the Manhattan-aligned line segments at a wall's floor / ceiling boundary (row-cost
     units per unit of evidence); only segments along that wall's own horizontal direction count."""
@@ -372,6 +377,9 @@ def _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts):
     from holoflow.depth.manhattan import manhattan_dp, manhattan_yaw, segment_evidence, segment_rays, wall_distances
 
     Hk, Wk = cost_f.shape
+    if cfg.region_cap > 0:  # robust data term: each column's evidence is capped above its best row
+        cost_f = np.minimum(cost_f - cost_f.min(0, keepdims=True), cfg.region_cap)
+        cost_c = np.minimum(cost_c - cost_c.min(0, keepdims=True), cfg.region_cap)
     p1, p2, nrm, ln = segment_rays(srgb)
     yaw, facts["manhattan"] = manhattan_yaw(nrm, ln)
     if yaw is None:
