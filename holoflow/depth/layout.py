@@ -449,11 +449,14 @@ def _interp_wrap(values: np.ndarray, x: np.ndarray) -> np.ndarray:
 def classify_scene(lab: np.ndarray, lat: np.ndarray) -> tuple[str, str]:
     """indoor | outdoor from the zenith cap (lat > 45 deg) of a Lab panorama, and why (one line).
 
-    Sky: bright, bluish or grey-white, smooth. A cap where most pixels are sky-like is outdoors.
+    Sky-like pixel: bluish (Lab b* < -5) and not darker than the image's median lightness, or clearly
+    blue (b* < -20, L > 20) at any lightness. A cap where most pixels are sky-like is outdoors.
     """
     cap = lab[lat > np.radians(45)]
     Lc, bc = cap[..., 0], cap[..., 2]
-    sky = (Lc >= np.median(lab[..., 0])) & (bc < -5)  # blue and not darker than the typical pixel; overcast skies are not recognised (docs)
+    # blue and not darker than the typical pixel, or a saturated blue (b* < -20: a clear zenith is
+    # often darker than sunlit ground); overcast skies are not recognised (docs)
+    sky = ((Lc >= np.median(lab[..., 0])) & (bc < -5)) | ((bc < -20) & (Lc > 20))
     frac = float(sky.mean()) if sky.size else 0.0
     if frac > 0.5:
         return "outdoor", f"{frac:.0%} of the zenith cap is bright blue sky (> 50%)"
