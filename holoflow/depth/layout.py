@@ -18,13 +18,14 @@ it estimates a radial depth [H, W] in metres, +inf for sky:
    Indoors (``manhattan``) the per-column state is instead a Manhattan wall: one of 4 orientations
    from the horizontal vanishing directions x an offset, scored by the same floor / ceiling costs plus
    the line segments along that wall's own direction, with a penalty per corner (``manhattan.py``);
-   below the horizon a column may end nearer, at its own free floor boundary (objects).
+   each column's floor / ceiling cost is capped (``region_cap``) so cluttered columns are bridged.
 5. **Depth.** The floor is the plane ``camera_height`` below the eye: radial depth h / sin(-lat).
-   Whatever stands on the floor boundary is vertical, at horizontal distance d_f = h / tan(-lat_f).
-   Indoors the ceiling height is the robust ratio of the two boundaries over the columns where the same
-   wall meets both; the ceiling is the plane that far above the eye, and above the horizon a column is
-   the wall that meets the ceiling (d_c), below it the object on the floor (d_f). Outdoors the sky is
-   +inf and the vertical structures rise from d_f up to the sky boundary.
+   A column's wall is vertical at horizontal distance d: radial d / cos(lat) between its floor
+   boundary -atan(h / d) and its ceiling boundary atan(c / d). Indoors the ceiling height c above the
+   eye is the one (of ``ceiling_steps`` candidates) whose wall fit costs least with a weak prior; the
+   ceiling is the plane c above the eye. Outdoors the sky is +inf and the vertical structures rise
+   from the ground boundary up to the sky boundary. Furniture is not modelled: it reads as floor or
+   wall (docs/depth-layout.md, failure modes).
 
 Metric scale comes from ``camera_height`` alone (1.6 m default, a standing adult's eye / a tripod).
 Everything is computed on a ``work_width`` copy (fast: about a second at 512 x 256) and evaluated
@@ -82,9 +83,6 @@ class LayoutConfig:
     """number of wall offsets (log-spaced, min_depth..max_depth_indoor, metres) per wall orientation."""
     corner_penalty: float = 80.0
     """cost (row-cost units, like the data costs) of each change of wall between neighbouring columns."""
-    objects: bool = True
-    """indoors (Manhattan fit): below the horizon a column ends at the nearer of its wall and its own
-    free floor boundary (furniture standing on the floor); above the horizon it is the wall."""
     ceiling_steps: int = 29
     """number of ceiling heights (log-spaced, 0.3..2.5 x camera_height above the eye) tried by the
     Manhattan fit (each one a DP over the columns)."""
@@ -346,10 +344,7 @@ def _estimate(work, srgb, cfg, facts, H0, W0):
     if scene == "indoor" and cfg.manhattan:
         d = _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts)
         if d is not None:
-            d_obj = None
-            if cfg.objects:  # things standing on the floor in front of the walls: the free floor boundary
-                d_obj = dist[boundary_dp(data_f, cfg.smoothness, cfg.jump)]
-            return _finish(d, facts["ceiling_above_eye_m"], h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges, d_obj)
+            return _finish(d, facts["ceiling_above_eye_m"], h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges)
     best = None
     heights = [None] if scene != "indoor" else list(h * np.exp(np.linspace(np.log(0.3), np.log(2.5), 15)))
     for ceiling in heights:
@@ -412,10 +407,9 @@ def _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts):
     return dW[path, cols[0]]
 
 
-def _finish(d, ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges, d_obj=None):
-    """Depth [H0, W0] from the horizontal wall distance per column ``d`` [Wk] (metres); ``d_obj`` [Wk]
-    (optional): where the floor ends in front of the wall (objects), used below the horizon when nearer."""
-    lat_f = -np.arctan(h / (d if d_obj is None else np.minimum(d, d_obj)))
+def _finish(d, ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges):
+    """Depth [H0, W0] from the horizontal wall distance per column ``d`` [Wk] (metres)."""
+    lat_f = -np.arctan(h / d)
     if ceiling is not None:
         lat_c = np.arctan(ceiling / d)
     else:  # outdoors: the sky region around the zenith, its own boundary per column
@@ -425,10 +419,9 @@ def _finish(d, ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges, d_obj=Non
     lat_f0 = _interp_wrap(lat_f, cols)
     lat_c0 = _interp_wrap(lat_c, cols)
     depth = compose_depth(H0, W0, lat_f0, lat_c0, h, ceiling, cfg)
-    d_f = d
-    facts["floor_distance_m"] = {"median": round(float(np.median(d_f)), 3),
-                                 "p10": round(float(np.percentile(d_f, 10)), 3),
-                                 "p90": round(float(np.percentile(d_f, 90)), 3)}
+    facts["floor_distance_m"] = {"median": round(float(np.median(d)), 3),
+                                 "p10": round(float(np.percentile(d, 10)), 3),
+                                 "p90": round(float(np.percentile(d, 90)), 3)}
     return LayoutDepth(depth.astype(np.float32), facts)
 
 
