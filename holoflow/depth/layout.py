@@ -18,13 +18,14 @@ it estimates a radial depth [H, W] in metres, +inf for sky:
    Indoors (``manhattan``) the per-column state is instead a Manhattan wall: one of 4 orientations
    from the horizontal vanishing directions x an offset, scored by the same floor / ceiling costs plus
    the line segments along that wall's own direction, with a penalty per corner (``manhattan.py``);
-   below the horizon a column may end nearer, at its own free floor boundary (objects).
+   each column's floor / ceiling cost is capped (``region_cap``) so cluttered columns are bridged.
 5. **Depth.** The floor is the plane ``camera_height`` below the eye: radial depth h / sin(-lat).
-   Whatever stands on the floor boundary is vertical, at horizontal distance d_f = h / tan(-lat_f).
-   Indoors the ceiling height is the robust ratio of the two boundaries over the columns where the same
-   wall meets both; the ceiling is the plane that far above the eye, and above the horizon a column is
-   the wall that meets the ceiling (d_c), below it the object on the floor (d_f). Outdoors the sky is
-   +inf and the vertical structures rise from d_f up to the sky boundary.
+   A column's wall is vertical at horizontal distance d: radial d / cos(lat) between its floor
+   boundary -atan(h / d) and its ceiling boundary atan(c / d). Indoors the ceiling height c above the
+   eye is the one (of ``ceiling_steps`` candidates) whose wall fit costs least with a weak prior; the
+   ceiling is the plane c above the eye. Outdoors the sky is +inf and the vertical structures rise
+   from the ground boundary up to the sky boundary. Furniture is not modelled: it reads as floor or
+   wall (docs/depth-layout.md, failure modes).
 
 Metric scale comes from ``camera_height`` alone (1.6 m default, a standing adult's eye / a tripod).
 Everything is computed on a ``work_width`` copy (fast: about a second at 512 x 256) and evaluated
@@ -82,9 +83,6 @@ class LayoutConfig:
     """number of wall offsets (log-spaced, min_depth..max_depth_indoor, metres) per wall orientation."""
     corner_penalty: float = 80.0
     """cost (row-cost units, like the data costs) of each change of wall between neighbouring columns."""
-    objects: bool = True
-    """indoors (Manhattan fit): below the horizon a column ends at the nearer of its wall and its own
-    free floor boundary (furniture standing on the floor); above the horizon it is the wall."""
     ceiling_steps: int = 29
     """number of ceiling heights (log-spaced, 0.3..2.5 x camera_height above the eye) tried by the
     Manhattan fit (each one a DP over the columns)."""
@@ -93,6 +91,11 @@ class LayoutConfig:
     ceiling_prior: float = 2.0
     """weight per column of the log-normal prior (sigma 0.5 in log metres) on the ceiling height
     around typical_ceiling (Manhattan fit only)."""
+    region_cap: float = 10.0
+    """Manhattan fit: a column's floor / ceiling row cost counts at most this much above its own best
+    row (row-cost units, about rows of mislabelled pixels), so a column where furniture, a window or
+    a same-coloured wall contradicts every wall hypothesis cannot outvote the rest (a truncated,
+    robust data term). 0 = no cap."""
     segment_weight: float = 20.0
     """weight of the Manhattan-aligned line segments at a wall's floor / ceiling boundary (row-cost
     units per unit of evidence); only segments along that wall's own horizontal direction count."""
@@ -341,10 +344,7 @@ def _estimate(work, srgb, cfg, facts, H0, W0):
     if scene == "indoor" and cfg.manhattan:
         d = _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts)
         if d is not None:
-            d_obj = None
-            if cfg.objects:  # things standing on the floor in front of the walls: the free floor boundary
-                d_obj = dist[boundary_dp(data_f, cfg.smoothness, cfg.jump)]
-            return _finish(d, facts["ceiling_above_eye_m"], h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges, d_obj)
+            return _finish(d, facts["ceiling_above_eye_m"], h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges)
     best = None
     heights = [None] if scene != "indoor" else list(h * np.exp(np.linspace(np.log(0.3), np.log(2.5), 15)))
     for ceiling in heights:
@@ -372,6 +372,9 @@ def _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts):
     from holoflow.depth.manhattan import manhattan_dp, manhattan_yaw, segment_evidence, segment_rays, wall_distances
 
     Hk, Wk = cost_f.shape
+    if cfg.region_cap > 0:  # robust data term: each column's evidence is capped above its best row
+        cost_f = np.minimum(cost_f - cost_f.min(0, keepdims=True), cfg.region_cap)
+        cost_c = np.minimum(cost_c - cost_c.min(0, keepdims=True), cfg.region_cap)
     p1, p2, nrm, ln = segment_rays(srgb)
     yaw, facts["manhattan"] = manhattan_yaw(nrm, ln)
     if yaw is None:
@@ -404,10 +407,9 @@ def _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts):
     return dW[path, cols[0]]
 
 
-def _finish(d, ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges, d_obj=None):
-    """Depth [H0, W0] from the horizontal wall distance per column ``d`` [Wk] (metres); ``d_obj`` [Wk]
-    (optional): where the floor ends in front of the wall (objects), used below the horizon when nearer."""
-    lat_f = -np.arctan(h / (d if d_obj is None else np.minimum(d, d_obj)))
+def _finish(d, ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges):
+    """Depth [H0, W0] from the horizontal wall distance per column ``d`` [Wk] (metres)."""
+    lat_f = -np.arctan(h / d)
     if ceiling is not None:
         lat_c = np.arctan(ceiling / d)
     else:  # outdoors: the sky region around the zenith, its own boundary per column
@@ -417,10 +419,9 @@ def _finish(d, ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges, d_obj=Non
     lat_f0 = _interp_wrap(lat_f, cols)
     lat_c0 = _interp_wrap(lat_c, cols)
     depth = compose_depth(H0, W0, lat_f0, lat_c0, h, ceiling, cfg)
-    d_f = d
-    facts["floor_distance_m"] = {"median": round(float(np.median(d_f)), 3),
-                                 "p10": round(float(np.percentile(d_f, 10)), 3),
-                                 "p90": round(float(np.percentile(d_f, 90)), 3)}
+    facts["floor_distance_m"] = {"median": round(float(np.median(d)), 3),
+                                 "p10": round(float(np.percentile(d, 10)), 3),
+                                 "p90": round(float(np.percentile(d, 90)), 3)}
     return LayoutDepth(depth.astype(np.float32), facts)
 
 
@@ -441,11 +442,14 @@ def _interp_wrap(values: np.ndarray, x: np.ndarray) -> np.ndarray:
 def classify_scene(lab: np.ndarray, lat: np.ndarray) -> tuple[str, str]:
     """indoor | outdoor from the zenith cap (lat > 45 deg) of a Lab panorama, and why (one line).
 
-    Sky: bright, bluish or grey-white, smooth. A cap where most pixels are sky-like is outdoors.
+    Sky-like pixel: bluish (Lab b* < -5) and not darker than the image's median lightness, or clearly
+    blue (b* < -20, L > 20) at any lightness. A cap where most pixels are sky-like is outdoors.
     """
     cap = lab[lat > np.radians(45)]
     Lc, bc = cap[..., 0], cap[..., 2]
-    sky = (Lc >= np.median(lab[..., 0])) & (bc < -5)  # blue and not darker than the typical pixel; overcast skies are not recognised (docs)
+    # blue and not darker than the typical pixel, or a saturated blue (b* < -20: a clear zenith is
+    # often darker than sunlit ground); overcast skies are not recognised (docs)
+    sky = ((Lc >= np.median(lab[..., 0])) & (bc < -5)) | ((bc < -20) & (Lc > 20))
     frac = float(sky.mean()) if sky.size else 0.0
     if frac > 0.5:
         return "outdoor", f"{frac:.0%} of the zenith cap is bright blue sky (> 50%)"

@@ -26,47 +26,14 @@ UP = np.array([0.0, -1.0, 0.0])
 def segment_rays(srgb8: np.ndarray, pitches_deg=(-40.0, 0.0, 40.0), views: int = 8, size: int = 256,
                  fov_deg: float = 90.0, min_length: float = 10.0):
     """Line segments of an 8-bit sRGB panorama [H, W, 3] seen by ``views`` x len(``pitches_deg``)
-    perspective views (degrees, + = looking up). Returns (p1 [N, 3], p2 [N, 3]) unit end rays (world),
-    normals [N, 3] (unit, p1 x p2) and lengths [N] (view pixels)."""
-    import cv2
-    import torch
-
-    from holoflow.geometry.camera import intrinsics_from_fov, look_at
-    from holoflow.geometry.sampling import equirect_to_pinhole
+    perspective views (degrees, + = looking up; ``segments.view_segments``). Returns (p1 [N, 3],
+    p2 [N, 3]) unit end rays (world), normals [N, 3] (unit, p1 x p2) and lengths [N] (view pixels)."""
+    from holoflow.depth.segments import great_circle_normals, view_segments
 
     yaws = np.tile(np.arange(views) * 2 * np.pi / views, len(pitches_deg))
     pitch = np.repeat(np.radians(np.asarray(pitches_deg, dtype=np.float64)), views)
-    n_v = len(yaws)
-    tg = np.stack([np.sin(yaws) * np.cos(pitch), -np.sin(pitch), np.cos(yaws) * np.cos(pitch)], 1)  # [V, 3]
-    V = torch.stack([look_at(torch.zeros(3, dtype=torch.float64), torch.from_numpy(t)) for t in tg])  # [V, 4, 4]
-    K = intrinsics_from_fov(fov_deg, size, size, dtype=torch.float64)[None].expand(n_v, 3, 3)
-    pano = torch.from_numpy(srgb8.astype(np.float64) / 255.0).permute(2, 0, 1)
-    imgs = equirect_to_pinhole(pano, K, V, size, size).permute(0, 2, 3, 1).numpy()  # [V, s, s, 3]
-    lsd = cv2.createLineSegmentDetector()
-    Kinv = np.linalg.inv(K[0].numpy())
-    P1, P2, L = [], [], []
-    for i in range(n_v):
-        grey = cv2.cvtColor((np.clip(imgs[i], 0, 1) * 255).astype(np.uint8), cv2.COLOR_RGB2GRAY)
-        lines = lsd.detect(grey)[0]
-        if lines is None:
-            continue
-        seg = lines.reshape(-1, 4).astype(np.float64)
-        length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
-        seg, length = seg[length >= min_length], length[length >= min_length]
-        if not len(seg):
-            continue
-        R = V[i, :3, :3].numpy()  # world-to-camera; rows of x @ Kinv.T @ R are R^T K^-1 x (world rays)
-        for ends, out in ((seg[:, :2], P1), (seg[:, 2:], P2)):
-            p = np.c_[ends, np.ones(len(seg))] @ Kinv.T @ R
-            out.append(p / np.linalg.norm(p, axis=1, keepdims=True))
-        L.append(length)
-    if not L:
-        z = np.zeros((0, 3))
-        return z, z, z, np.zeros(0)
-    p1, p2, lengths = np.concatenate(P1), np.concatenate(P2), np.concatenate(L)
-    n = np.cross(p1, p2)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    return p1, p2, n, lengths
+    p1, p2, lengths = view_segments(srgb8, yaws, pitch, size, fov_deg, min_length)
+    return p1, p2, great_circle_normals(p1, p2), lengths
 
 
 def horizontal_directions(normals: np.ndarray, min_tilt_deg: float = 10.0):

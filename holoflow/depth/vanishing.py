@@ -15,42 +15,12 @@ import numpy as np
 def segment_normals(srgb8: np.ndarray, views: int = 8, size: int = 256, fov_deg: float = 90.0,
                     min_length: float = 12.0) -> tuple[np.ndarray, np.ndarray]:
     """Great-circle normals [N, 3] (world, unit) and lengths [N] (pixels) of the line segments seen by
-    ``views`` horizontal perspective views of an 8-bit sRGB panorama [H, W, 3]."""
-    import cv2
-    import torch
-
-    from holoflow.geometry.camera import intrinsics_from_fov, look_at
-    from holoflow.geometry.sampling import equirect_to_pinhole
+    ``views`` horizontal perspective views of an 8-bit sRGB panorama [H, W, 3] (``segments.view_segments``)."""
+    from holoflow.depth.segments import great_circle_normals, view_segments
 
     yaws = np.arange(views) * 2 * np.pi / views
-    targets = torch.tensor(np.stack([np.sin(yaws), np.zeros(views), np.cos(yaws)], 1), dtype=torch.float64)
-    V = torch.stack([look_at(torch.zeros(3, dtype=torch.float64), t) for t in targets])  # [V, 4, 4]
-    K = intrinsics_from_fov(fov_deg, size, size, dtype=torch.float64)[None].expand(views, 3, 3)
-    pano = torch.from_numpy(srgb8.astype(np.float64) / 255.0).permute(2, 0, 1)
-    imgs = equirect_to_pinhole(pano, K, V, size, size).permute(0, 2, 3, 1).numpy()  # [V, s, s, 3]
-    lsd = cv2.createLineSegmentDetector()
-    Kinv = np.linalg.inv(K[0].numpy())
-    normals, lengths = [], []
-    for i in range(views):
-        grey = cv2.cvtColor((np.clip(imgs[i], 0, 1) * 255).astype(np.uint8), cv2.COLOR_RGB2GRAY)
-        lines = lsd.detect(grey)[0]
-        if lines is None:
-            continue
-        seg = lines.reshape(-1, 4).astype(np.float64)
-        length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
-        seg, length = seg[length >= min_length], length[length >= min_length]
-        if not len(seg):
-            continue
-        R = V[i, :3, :3].numpy()  # world-to-camera
-        p1 = np.c_[seg[:, :2], np.ones(len(seg))] @ Kinv.T @ R  # camera rays -> world (R^T x)
-        p2 = np.c_[seg[:, 2:], np.ones(len(seg))] @ Kinv.T @ R
-        n = np.cross(p1, p2)
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-        normals.append(n)
-        lengths.append(length)
-    if not normals:
-        return np.zeros((0, 3)), np.zeros(0)
-    return np.concatenate(normals), np.concatenate(lengths)
+    p1, p2, lengths = view_segments(srgb8, yaws, np.zeros(views), size, fov_deg, min_length)
+    return great_circle_normals(p1, p2), lengths
 
 
 def vertical_direction(normals: np.ndarray, lengths: np.ndarray, max_tilt_deg: float = 30.0

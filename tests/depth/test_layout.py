@@ -6,7 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holoflow.depth.layout import LayoutConfig, boundary_dp, estimate_layout_depth, lower_boundary, upper_boundary
+from holoflow.depth.layout import (LayoutConfig, boundary_dp, classify_scene, estimate_layout_depth, lower_boundary,
+                                   upper_boundary)
 from holoflow.depth.vanishing import rotate_equirect, rotation_to_upright, segment_normals, vertical_direction
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -90,6 +91,30 @@ def test_all_sky_panorama_is_sky_or_finite():
     assert not np.isnan(est.depth).any()
     assert np.isinf(est.depth[0]).all()  # the zenith row is sky
     assert (est.depth[np.isfinite(est.depth)] > 0).all()
+
+
+def test_deep_blue_sky_over_bright_ground_is_outdoors():
+    """A clear zenith is often darker than sunlit grass (the procedural meadow): saturated blue counts
+    as sky whatever its lightness; a white ceiling over a bright floor stays indoors."""
+    H, W = 64, 128
+    img = np.zeros((H, W, 3), np.float32)
+    img[: H // 2] = (0.05, 0.12, 0.45)   # deep blue sky, darker than the ground
+    img[H // 2:] = (0.20, 0.45, 0.08)    # sunlit grass
+    assert classify_scene(_lab_of(img), _lat(H))[0] == "outdoor"
+    img[: H // 2] = (0.8, 0.8, 0.8)      # white ceiling
+    img[H // 2:] = (0.9, 0.9, 0.85)      # bright floor
+    assert classify_scene(_lab_of(img), _lat(H))[0] == "indoor"
+
+
+def _lab_of(img):
+    from holoflow.depth.layout import _lab
+    from holoflow.imageops.color import linear_to_uint8
+
+    return _lab(linear_to_uint8(np.clip(img, 0, 1)))
+
+
+def _lat(H):
+    return np.pi / 2 - np.pi * (np.arange(H) + 0.5) / H
 
 
 def test_tilt_is_estimated_and_corrected():

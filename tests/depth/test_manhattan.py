@@ -90,17 +90,25 @@ def test_wall_distances_and_dp_recover_a_piecewise_room():
     np.testing.assert_array_equal(manhattan_dp(cost, 5.0), truth)
 
 
-def test_layout_recovers_a_rendered_manhattan_room():
-    H, W, yaw, walls, h, ceiling = 256, 512, np.radians(25.0), [2.0, 3.2, 2.6, 4.0], 1.6, 1.1
+_COLOURS = np.array([(0.10, 0.09, 0.08), (0.85, 0.85, 0.85), (0.50, 0.40, 0.28), (0.42, 0.33, 0.24),
+                     (0.50, 0.40, 0.28), (0.42, 0.33, 0.24)], np.float32)  # floor, ceiling, 4 walls
+
+
+def _rendered_room(H, W, yaw, walls, h, ceiling):
+    """Linear RGB [H, W, 3] of the box room (flat colours, dark edges, slight noise) and its depth."""
     depth, sid = _box(H, W, yaw, walls, h, ceiling)
-    colours = np.array([(0.10, 0.09, 0.08), (0.85, 0.85, 0.85), (0.50, 0.40, 0.28), (0.42, 0.33, 0.24),
-                        (0.50, 0.40, 0.28), (0.42, 0.33, 0.24)], np.float32)
-    img = colours[sid]
+    img = _COLOURS[sid]
     edge = np.zeros((H, W), bool)
     edge[1:] |= sid[1:] != sid[:-1]
     edge[:, 1:] |= sid[:, 1:] != sid[:, :-1]
     img[edge] = 0.03  # dark skirting, cornice and corner lines
     img *= np.exp(np.random.default_rng(0).normal(0, 0.02, img.shape)).astype(np.float32)
+    return img, depth
+
+
+def test_layout_recovers_a_rendered_manhattan_room():
+    H, W, yaw, walls, h, ceiling = 256, 512, np.radians(25.0), [2.0, 3.2, 2.6, 4.0], 1.6, 1.1
+    img, depth = _rendered_room(H, W, yaw, walls, h, ceiling)
     est = estimate_layout_depth(img, LayoutConfig(scene="indoor"))
     assert "manhattan" in est.facts and est.facts["manhattan"].get("yaw_deg") is not None
     assert abs(est.facts["manhattan"]["yaw_deg"] - 25.0) < 1.5
@@ -108,3 +116,18 @@ def test_layout_recovers_a_rendered_manhattan_room():
     assert np.isfinite(est.depth).all()
     assert np.median(rel) < 0.05 and rel.mean() < 0.12, (np.median(rel), rel.mean(), est.facts)
     assert abs(est.facts["ceiling_above_eye_m"] - ceiling) / ceiling < 0.15
+
+
+def test_capped_region_cost_bridges_a_block_of_contradicting_columns():
+    """A third of the columns painted floor-coloured from 3 to 35 deg below the horizon (a low,
+    floor-coloured sofa or bed flooding the floor boundary): with the capped data term the Manhattan
+    walls of the rest of the room continue through the block; uncapped, the block pulls its walls out."""
+    H, W, yaw, walls, h, ceiling = 256, 512, np.radians(25.0), [2.0, 3.2, 2.6, 4.0], 1.6, 1.1
+    img, depth = _rendered_room(H, W, yaw, walls, h, ceiling)
+    lat = np.pi / 2 - np.pi * (np.arange(H) + 0.5) / H
+    rows = (lat < -np.radians(3)) & (lat > -np.radians(35))
+    img[np.ix_(rows, np.arange(300, 300 + int(0.35 * W)))] = _COLOURS[0]
+    capped = estimate_layout_depth(img, LayoutConfig(scene="indoor"))
+    uncapped = estimate_layout_depth(img, LayoutConfig(scene="indoor", region_cap=0.0))
+    assert (np.abs(capped.depth - depth) / depth).mean() < 0.03
+    assert (np.abs(uncapped.depth - depth) / depth).mean() > 0.05
