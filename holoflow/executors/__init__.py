@@ -11,7 +11,8 @@ memory_gb}``); it never changes what a step computes. Every step still runs as i
   from a Ray cluster (a local one, or ``--address`` of an existing cluster).
 
 Interface (both): ``fits(resources)``, ``submit(task) -> handle``, ``wait(timeout) -> [(handle,
-result)]``, ``abort()``, ``close()``, plus ``kind``, ``default_retries`` and ``describe()``.
+result)]``, ``abort()``, ``close()``, plus ``kind``, ``default_retries`` and ``describe()``; the local
+one also ``expect(needs)`` (warm templates for the steps to come).
 """
 from __future__ import annotations
 
@@ -40,6 +41,7 @@ class StepTask:
     replace: bool = False           # --force: install the new record even if one exists
     attempt: int = 1
     env: dict[str, str] = field(default_factory=dict)
+    modules: list[str] = field(default_factory=list)    # modules outside the project it imports
 
 
 def step_env(resources: dict[str, Any]) -> dict[str, str]:
@@ -75,13 +77,13 @@ def host_memory_gb() -> float:
 
 
 def make_executor(kind: str, jobs: int = 1, address: str | None = None, device: str = "cpu",
-                  on_line=None):
+                  on_line=None, warm: bool = True):
     """The executor named ``kind`` (local | ray). ``on_line(label, line)`` gets each step's output lines
-    (local only; called on the thread that calls ``wait``)."""
+    (local only; called on the thread that calls ``wait``); ``warm`` false: every local step exec'd."""
     if kind == "local":
         from .local import LocalExecutor
 
-        return LocalExecutor(jobs, device=device, on_line=on_line)
+        return LocalExecutor(jobs, device=device, on_line=on_line, warm=warm)
     if kind == "ray":
         from .ray_executor import RayExecutor
 
