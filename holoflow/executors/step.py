@@ -56,7 +56,7 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
     t0 = time.monotonic()
     with open(log_path, "wb") as log:
         try:
-            proc = launcher.start(str(program), str(job), task.cwd, env) if warm else _Cold(argv, task.cwd, env)
+            proc = launcher.start(str(program), str(job), task.cwd, env) if warm else ExecStep(argv, task.cwd, env)
         except BaseException:
             remove_tree(staging)
             raise
@@ -125,7 +125,7 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
     return {"ok": True, "record": rec, "host": host}
 
 
-class _Cold:
+class ExecStep:
     """A step exec'd as its own program (``[python,] PROGRAM JOB.json``, no shell), dying with its
     starter (PR_SET_PDEATHSIG)."""
 
