@@ -45,12 +45,14 @@ class StepTask:
 
 
 def step_env(resources: dict[str, Any]) -> dict[str, str]:
-    """Thread-count variables for a step: its declared cpus, capped at this host's cores.
+    """Thread-count variables for a step: its declared cpus, capped at this host's cores; and idle
+    OpenMP threads (torch's, numba's) sleep instead of spinning, unless $OMP_WAIT_POLICY says otherwise
+    (spinning between a step's parallel regions starved its own main thread: docs/profile-preview.md).
 
     The same on every executor, so a step computes the same bytes under ``-j 1``, ``-j N`` and Ray.
     """
     n = str(max(1, min(int(resources.get("cpus", 1)), os.cpu_count() or 1)))
-    return {v: n for v in THREAD_VARS}
+    return {**{v: n for v in THREAD_VARS}, "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
 
 
 def gpu_ids() -> list[str]:

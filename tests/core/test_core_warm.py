@@ -119,3 +119,11 @@ def _alive(pid):
 
 def test_preload_keeps_heavy_third_party_modules_only():
     assert preload(["torch.nn", "numpy", "json", "diffusers", "holoflow.stage"]) == ["numpy", "torch.nn"]
+
+
+def test_step_env_sets_threads_and_a_passive_wait_policy(monkeypatch):
+    monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    env = step_env({"cpus": 1})
+    assert env["OMP_NUM_THREADS"] == env["NUMBA_NUM_THREADS"] == "1" and env["OMP_WAIT_POLICY"] == "PASSIVE"
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    assert step_env({"cpus": 1})["OMP_WAIT_POLICY"] == "ACTIVE"
