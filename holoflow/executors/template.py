@@ -106,6 +106,10 @@ def _child(req: dict, out: int, inherited: list[int], libc) -> None:
         sys.argv = [program, req["job"]]
         sys.path[0] = os.path.dirname(program)
         code = _run(program)
+    except BaseException:
+        import traceback
+
+        traceback.print_exc()           # becoming the step failed: say why in its log
     finally:
         for stream in (sys.stdout, sys.stderr):
             try:
