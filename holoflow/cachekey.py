@@ -73,13 +73,21 @@ class CodeHasher:
         out = {self._relative(prog, None): self.digest(prog)}
         if not prog.endswith(".py"):
             return out
+        for f, root in self._graph(prog).closure(prog).items():
+            out[self._relative(f, root)] = self.digest(f)
+        return out
+
+    def external(self, program: Path) -> set[str]:
+        """Modules outside the project that ``program``'s closure imports (empty for a non-Python one)."""
+        prog = str(program)
+        return self._graph(prog).external(prog) if prog.endswith(".py") else set()
+
+    def _graph(self, prog: str) -> ImportGraph:
         folder = os.path.dirname(prog)
         if folder not in self._graphs:
             roots = [(folder, None), (self.root.rstrip("/"), None), (HOLOFLOW_ROOT, frozenset({"holoflow"}))]
             self._graphs[folder] = ImportGraph(roots, self.imports)
-        for f, root in self._graphs[folder].closure(prog).items():
-            out[self._relative(f, root)] = self.digest(f)
-        return out
+        return self._graphs[folder]
 
     def digest(self, path: str) -> str:
         """Digest of one source file: one stat per process, a rehash only when (size, mtime_ns) moved."""

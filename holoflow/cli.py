@@ -103,6 +103,9 @@ def _parser() -> argparse.ArgumentParser:
         r.add_argument("--executor", choices=["local", "ray"], default="local",
                        help="where steps run: this machine, or a Ray cluster (the ray extra)")
         r.add_argument("--address", help="Ray cluster address (default: start a local Ray with -j CPUs)")
+        r.add_argument("--cold", action="store_true",
+                       help="exec every step as a fresh Python (default: Python steps fork from a warm "
+                       "template that imported torch & co once; also $HOLOFLOW_COLD=1)")
         r.add_argument("--retries", type=int, metavar="N",
                        help="retry a failed step N times (default 0 local, 2 ray)")
         r.add_argument("--prompts", metavar="FILE",
@@ -178,7 +181,8 @@ def _options(args):
                    device=getattr(args, "device", None), lock_timeout=getattr(args, "lock_timeout", None),
                    verbose=getattr(args, "verbose", False), jobs=getattr(args, "jobs", 1),
                    executor=getattr(args, "executor", "local"), address=getattr(args, "address", None),
-                   retries=getattr(args, "retries", None), models=getattr(args, "models", None))
+                   retries=getattr(args, "retries", None), models=getattr(args, "models", None),
+                   cold=getattr(args, "cold", False) or os.environ.get("HOLOFLOW_COLD", "") not in ("", "0"))
 
 
 # -- commands --------------------------------------------------------------------------------------

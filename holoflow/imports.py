@@ -96,6 +96,16 @@ class ImportGraph:
         files.pop(program, None)
         return files
 
+    def external(self, program: str) -> set[str]:
+        """Absolute names of the modules outside the project (third-party or standard library) that
+        ``program`` or any file of its closure imports."""
+        out: set[str] = set()
+        for file in [program, *self.closure(program)]:
+            for level, module, _ in self.parsed(file)[0]:
+                if not level and module and self.find(module.partition(".")[0]) is None:
+                    out.add(module)
+        return out
+
     def find(self, module: str) -> Found | None:
         """Where ``module`` (dotted name) lives under the roots, or None when outside the project."""
         if module in self._found:

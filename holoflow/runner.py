@@ -53,6 +53,7 @@ class Options:
     address: str | None = None      # Ray cluster address (ray executor)
     retries: int | None = None      # extra attempts per failed step (None: the executor's default)
     models: str | None = None       # --models DIR: every real engine loads from DIR's manifest.json
+    cold: bool = False              # --cold: exec every local step (no warm template)
 
 
 @dataclass
@@ -318,7 +319,7 @@ def make_executor_for(opts: Options, device: str, display):
         elif opts.verbose and not line.startswith("@meta "):
             display.line(f"    {label}| {line}")
 
-    return make_executor(opts.executor, opts.jobs, opts.address, device, on_line=on_line)
+    return make_executor(opts.executor, opts.jobs, opts.address, device, on_line=on_line, warm=not opts.cold)
 
 
 class _Scheduler:
@@ -424,9 +425,13 @@ class _Scheduler:
                 "program": stage.run}
         return StepTask(store=str(ctx.store.root), stage=name, label=st.name(name), key=key, components=comp,
                         spec=spec, program=str(pipe.program(name)), cwd=str(pipe.root),
-                        resources=r.resources.as_dict(), provenance=prov, replace=forced)
+                        resources=r.resources.as_dict(), provenance=prov, replace=forced,
+                        modules=sorted(ctx.hasher.external(pipe.program(name))))
 
     def submit(self, job: _Job) -> None:
+        if self.executor_made is None and self.executor.kind == "local":
+            self.executor.expect([(st.ctx.resolved[n].resources.as_dict(), sorted(st.ctx.hasher.external(
+                st.ctx.pipe.program(n)))) for st in self.states for n in st.pending if n not in st.ctx.uses])
         for st, name in job.waiters:              # "ran in" counts from the start, not the queue
             st.t0[name] = time.monotonic()
         self.display.start_step(job.task.label, self.done + 1, self.total,

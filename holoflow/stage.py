@@ -68,6 +68,13 @@ class Job:
         if "torch" in sys.modules:
             sys.modules["torch"].set_num_threads(self.cpus)
 
+    def torch_threads(self, n: int) -> None:
+        """From here on torch uses ``n`` intra-op threads (the other pools keep ``cpus``): for a step whose
+        torch work is on small tensors, where OpenMP barriers cost more than they save (docs/bench-startup.md)."""
+        import torch
+
+        torch.set_num_threads(n)
+
     def config(self, cls: type[P]) -> P:
         """The step's params as the stage's typed class (holoflow/params.py), every value checked."""
         return cls.from_params(self.params)

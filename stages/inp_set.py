@@ -11,6 +11,7 @@ def main() -> int:
     from holoflow.stage import Job
 
     job = Job.from_argv()
+    job.torch_threads(1)          # small tensors here; the numba kernels use job.cpus threads
     import numpy as np
     import torch
 

@@ -7,6 +7,7 @@ def main() -> int:
     from holoflow.stage import Job
 
     job = Job.from_argv()
+    job.torch_threads(1)          # small tensors here; the numba kernels use job.cpus threads
     from holoflow.io.ply import read_points
     from holoflow.recon.config import PreOptParams
     from holoflow.recon.schedule import pre_optimize, save_result

@@ -8,6 +8,7 @@ def main() -> int:
     from holoflow.stage import Job
 
     job = Job.from_argv()
+    job.torch_threads(1)          # small tensors here; the numba kernels use job.cpus threads
     from holoflow.io.ply import read_points
     from holoflow.recon.config import TransferOptParams
     from holoflow.recon.preview import write_previews

@@ -11,7 +11,8 @@ memory_gb}``); it never changes what a step computes. Every step still runs as i
   from a Ray cluster (a local one, or ``--address`` of an existing cluster).
 
 Interface (both): ``fits(resources)``, ``submit(task) -> handle``, ``wait(timeout) -> [(handle,
-result)]``, ``abort()``, ``close()``, plus ``kind``, ``default_retries`` and ``describe()``.
+result)]``, ``abort()``, ``close()``, plus ``kind``, ``default_retries`` and ``describe()``; the local
+one also ``expect(needs)`` (warm templates for the steps to come).
 """
 from __future__ import annotations
 
@@ -40,15 +41,18 @@ class StepTask:
     replace: bool = False           # --force: install the new record even if one exists
     attempt: int = 1
     env: dict[str, str] = field(default_factory=dict)
+    modules: list[str] = field(default_factory=list)    # modules outside the project it imports
 
 
 def step_env(resources: dict[str, Any]) -> dict[str, str]:
-    """Thread-count variables for a step: its declared cpus, capped at this host's cores.
+    """Thread-count variables for a step: its declared cpus, capped at this host's cores; and idle
+    OpenMP threads (torch's, numba's) sleep instead of spinning, unless $OMP_WAIT_POLICY says otherwise
+    (spinning between a step's parallel regions starved its own main thread: docs/profile-preview.md).
 
     The same on every executor, so a step computes the same bytes under ``-j 1``, ``-j N`` and Ray.
     """
     n = str(max(1, min(int(resources.get("cpus", 1)), os.cpu_count() or 1)))
-    return {v: n for v in THREAD_VARS}
+    return {**{v: n for v in THREAD_VARS}, "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
 
 
 def gpu_ids() -> list[str]:
@@ -75,13 +79,13 @@ def host_memory_gb() -> float:
 
 
 def make_executor(kind: str, jobs: int = 1, address: str | None = None, device: str = "cpu",
-                  on_line=None):
+                  on_line=None, warm: bool = True):
     """The executor named ``kind`` (local | ray). ``on_line(label, line)`` gets each step's output lines
-    (local only; called on the thread that calls ``wait``)."""
+    (local only; called on the thread that calls ``wait``); ``warm`` false: every local step exec'd."""
     if kind == "local":
         from .local import LocalExecutor
 
-        return LocalExecutor(jobs, device=device, on_line=on_line)
+        return LocalExecutor(jobs, device=device, on_line=on_line, warm=warm)
     if kind == "ray":
         from .ray_executor import RayExecutor
 

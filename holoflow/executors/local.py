@@ -4,7 +4,9 @@ Each step takes ``min(cpus, N)`` CPU slots, ``gpus`` whole GPUs (exported to it 
 CUDA_VISIBLE_DEVICES, so two GPU steps never share a GPU) and ``memory_gb`` of this host's memory;
 a step that asks for more than the machine has is clamped so it still runs (alone). GPUs count only
 for ``--device cuda``: on a CPU run every step is a CPU step. Each running step is watched by one
-thread; results come back through a queue read by the runner's (main) thread.
+thread; results come back through a queue read by the runner's (main) thread. Python steps start
+warm (forked from a template that imported the heavy modules once, holoflow/executors/warm.py) unless
+``warm`` is off (``--cold``) or the platform lacks what it needs.
 """
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import queue
 import threading
 from typing import Any
 
-from . import StepTask, gpu_ids, host_memory_gb
+from . import StepTask, gpu_ids, host_memory_gb, step_env
 from .step import run_step
 
 
@@ -20,7 +22,7 @@ class LocalExecutor:
     kind = "local"
     default_retries = 0
 
-    def __init__(self, jobs: int = 1, device: str = "cpu", on_line=None):
+    def __init__(self, jobs: int = 1, device: str = "cpu", on_line=None, warm: bool = True):
         self.jobs = max(1, int(jobs))
         self.gpus = gpu_ids() if device == "cuda" else []
         self.memory_gb = host_memory_gb()
@@ -34,10 +36,27 @@ class LocalExecutor:
         self._held: dict[int, tuple[int, list[str], float]] = {}
         self._next = 0
         self._aborted = False
+        self.launcher = None
+        if warm:
+            from . import warm as warm_mod
+
+            self.launcher = warm_mod.Launcher() if warm_mod.supported() else None
 
     def describe(self) -> str:
         gpus = f", {len(self.gpus)} GPU" if self.gpus else ""
-        return f"local, -j {self.jobs}{gpus}"
+        return f"local, -j {self.jobs}{gpus}, {'warm' if self.launcher else 'cold'}"
+
+    def expect(self, needs: list[tuple[dict[str, Any], list[str]]]) -> None:
+        """Steps still to come, as (resources, external imports): start their warm templates now, so
+        their imports overlap the steps before them. Call it from the run's scheduling thread."""
+        if self.launcher is None:
+            return
+        by_threads: dict[tuple, tuple[dict[str, str], set[str]]] = {}
+        for res, modules in needs:
+            env = step_env(res)
+            by_threads.setdefault(tuple(sorted(env.items())), (env, set()))[1].update(modules)
+        for env, modules in by_threads.values():
+            self.launcher.ensure(env, sorted(modules))
 
     def request(self, res: dict[str, Any]) -> tuple[int, int, float]:
         """(cpu slots, gpus, memory GiB) a step with declared ``res`` takes here (clamped to the host)."""
@@ -64,6 +83,8 @@ class LocalExecutor:
         handle = self._next
         self._next += 1
         self._held[handle] = (cpus, taken, mem)
+        if self.launcher is not None and task.program.endswith(".py"):
+            self.launcher.ensure(step_env(task.resources), task.modules)
         t = threading.Thread(target=self._work, args=(handle, task), name=f"holoflow-{task.label}", daemon=True)
         self._threads[handle] = t
         t.start()
@@ -80,7 +101,7 @@ class LocalExecutor:
 
         try:
             result = run_step(task, "local", on_line=line if self.on_line else None, started=started,
-                              aborted=lambda: self._aborted)
+                              aborted=lambda: self._aborted, launcher=self.launcher)
         except BaseException as e:          # a bug or an OS error in the runner side: report, don't hang
             result = {"ok": False, "reason": f"{type(e).__name__}: {e}", "tail": ""}
         self._events.put(("done", handle, result))
@@ -124,3 +145,5 @@ class LocalExecutor:
     def close(self) -> None:
         if self._threads:
             self.abort()
+        if self.launcher is not None:
+            self.launcher.close()

@@ -27,12 +27,14 @@ LOG_TAIL = 15
 
 
 def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], None] | None = None,
-             started: Callable[[subprocess.Popen], None] | None = None,
-             aborted: Callable[[], bool] | None = None) -> dict[str, Any]:
+             started: Callable[[Any], None] | None = None,
+             aborted: Callable[[], bool] | None = None, launcher=None) -> dict[str, Any]:
     """Run ``task``'s program; on exit 0 commit outputs + record. Returns {ok, record | reason, log, tail}.
 
-    ``on_line`` gets each output line (progress, meta, log); ``started`` the process once it runs;
-    ``aborted()`` true means the run was stopped: nothing is committed and no failed log is kept.
+    ``on_line`` gets each output line (progress, meta, log); ``started`` the process once it runs (it
+    has ``pid`` and ``kill()``); ``aborted()`` true means the run was stopped: nothing is committed and
+    no failed log is kept. With a ``launcher`` (holoflow.executors.warm) a Python program is forked
+    from a warm template instead of exec'd.
     """
     store = Store(task.store)
     staging = store.staging(task.stage)
@@ -43,18 +45,21 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
     job.write_text(json.dumps({**task.spec, "output_dir": str(out_dir), "work_dir": str(work_dir)},
                               indent=1, sort_keys=True))
     program = Path(task.program)
-    argv = [sys.executable, str(program), str(job)] if program.suffix == ".py" else [str(program), str(job)]
+    python = program.suffix == ".py"
+    argv = [sys.executable, str(program), str(job)] if python else [str(program), str(job)]
     env = dict(os.environ, PYTHONUNBUFFERED="1", HOLOFLOW_STAGE=task.stage, **step_env(task.resources),
                **task.env)
+    warm = launcher is not None and python
     log_path = staging / "log.txt"
     meta: dict[str, Any] = {}
     t_start = time.time()
     t0 = time.monotonic()
-    prctl = _prctl()
     with open(log_path, "wb") as log:
-        proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, cwd=task.cwd, env=env,
-                                preexec_fn=(lambda: prctl(1, signal.SIGKILL)) if prctl else None)
+        try:
+            proc = launcher.start(str(program), str(job), task.cwd, env) if warm else ExecStep(argv, task.cwd, env)
+        except BaseException:
+            remove_tree(staging)
+            raise
         try:
             if started:
                 started(proc)
@@ -67,13 +72,15 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
                         meta.update(m)
                 if on_line:
                     on_line(line)
-            _, status, usage = os.wait4(proc.pid, 0)
-            proc.returncode = code = os.waitstatus_to_exitcode(status)
+            status, usage = proc.wait4()
+            code = os.waitstatus_to_exitcode(status)
         except BaseException:
             proc.kill()
-            proc.wait()
+            proc.wait4()
             remove_tree(staging)
             raise
+        finally:
+            proc.stdout.close()
     wall = time.monotonic() - t0
     host = platform.node()
     if aborted and aborted():
@@ -83,6 +90,8 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
         kept = _keep_failed_log(store, task, log_path)
         remove_tree(staging)
         reason = f"killed by signal {-code}" if code < 0 else f"exit code {code}"
+        if getattr(proc, "lost", False):
+            reason += " (its warm template died)"
         return {"ok": False, "host": host, "reason": reason, "log": str(kept), "tail": _tail(kept, LOG_TAIL)}
     files = sorted(p for p in out_dir.rglob("*") if not p.is_dir())
     bad = [p for p in files if p.is_symlink() or not p.is_file()]
@@ -106,7 +115,7 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
             "wall_s": round(wall, 3), "cpu_s": round(usage.ru_utime + usage.ru_stime, 3),
             "peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "exit_code": code,
             "log": log_entry["digest"], "log_size": log_entry["size"],
-            "host": host, "executor": executor, "attempt": task.attempt,
+            "host": host, "executor": executor, "launch": "warm" if warm else "cold", "attempt": task.attempt,
             "resources": {**task.resources, **({"gpu_ids": task.env["CUDA_VISIBLE_DEVICES"]}
                                                if "CUDA_VISIBLE_DEVICES" in task.env else {})},
         },
@@ -114,6 +123,31 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
     rec = store.write_record(rec, replace=task.replace)      # first commit of a key wins
     remove_tree(staging)
     return {"ok": True, "record": rec, "host": host}
+
+
+class ExecStep:
+    """A step exec'd as its own program (``[python,] PROGRAM JOB.json``, no shell), dying with its
+    starter (PR_SET_PDEATHSIG)."""
+
+    def __init__(self, argv: list[str], cwd: str, env: dict[str, str]):
+        self._proc = popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                           cwd=cwd, env=env)
+        self.pid, self.stdout = self._proc.pid, self._proc.stdout
+
+    def kill(self) -> None:
+        self._proc.kill()
+
+    def wait4(self):
+        """(wait status, resource use) of the finished step."""
+        _, status, usage = os.wait4(self.pid, 0)
+        self._proc.returncode = os.waitstatus_to_exitcode(status)
+        return status, usage
+
+
+def popen(argv: list[str], **kw) -> subprocess.Popen:
+    """``subprocess.Popen`` (no shell) of a process that dies with the thread that started it."""
+    prctl = _prctl()
+    return subprocess.Popen(argv, preexec_fn=(lambda: prctl(1, signal.SIGKILL)) if prctl else None, **kw)
 
 
 def _prctl():

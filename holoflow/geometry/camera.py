@@ -105,7 +105,7 @@ def pinhole_rays(K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int
     cam = torch.stack([xc, yc, torch.ones_like(xc)], dim=-1)  # [..., H, W, 3]
     cam = cam / torch.linalg.vector_norm(cam, dim=-1, keepdim=True)
     R = viewmat[..., :3, :3]
-    lead = torch.broadcast_shapes(cam.shape[:-3], R.shape[:-2])
+    lead = torch.broadcast_tensors(cam[..., 0, 0, 0], R[..., 0, 0])[0].shape  # not broadcast_shapes: it imports sympy
     flat = cam.expand(*lead, height, width, 3).reshape(*lead, height * width, 3)
     dirs = (flat @ R.expand(*lead, 3, 3)).reshape(*lead, height, width, 3)  # rows: (R^T cam)^T
     origins = camera_centers(viewmat)[..., None, None, :].expand_as(dirs)

@@ -75,6 +75,23 @@ def project_points_zbuffer(xyz: torch.Tensor, rgb: torch.Tensor, K: torch.Tensor
     ids = ok.nonzero().squeeze(1)  # only points that can land in the image
     uv, z, radii = uv[ids], z[ids], radii[ids]
     ix, iy = torch.floor(uv[:, 0]).long(), torch.floor(uv[:, 1]).long()
+    if dev.type == "cpu":
+        from holoflow.geometry.zbuffer_cpu import zbuffer_numpy
+
+        d, o = zbuffer_numpy(ix.numpy(), iy.numpy(), z.detach().contiguous().numpy(), ids.numpy(),
+                             radii.contiguous().numpy(), width, height, N)
+        depth, owner = torch.from_numpy(d), torch.from_numpy(o)
+    else:
+        depth, owner = _zbuffer_torch(ix, iy, z, ids, radii, rmax, width, height, N)
+    hit = owner < N
+    image = torch.zeros(height * width, C, dtype=rgb.dtype, device=dev)
+    image[hit] = rgb[owner[hit]]
+    return image.reshape(height, width, C), hit.reshape(height, width).to(xyz.dtype), depth.reshape(height, width)
+
+
+def _zbuffer_torch(ix, iy, z, ids, radii, rmax: int, width: int, height: int, N: int):
+    """(depth, owner) [H W] flat of ``project_points_zbuffer``: one masked pass per square offset."""
+    dev = z.device
     pix_l, z_l, id_l = [], [], []
     for dy in range(-(rmax - 1), rmax):
         for dx in range(-(rmax - 1), rmax):
@@ -85,15 +102,12 @@ def project_points_zbuffer(xyz: torch.Tensor, rgb: torch.Tensor, K: torch.Tensor
             z_l.append(z[sel])
             id_l.append(ids[sel])
     pix, zz, pid = torch.cat(pix_l), torch.cat(z_l), torch.cat(id_l)
-    depth = torch.full((height * width,), float("inf"), dtype=xyz.dtype, device=dev)
+    depth = torch.full((height * width,), float("inf"), dtype=z.dtype, device=dev)
     depth.scatter_reduce_(0, pix, zz, reduce="amin")
     win = zz == depth[pix]
     owner = torch.full((height * width,), N, dtype=torch.long, device=dev)
     owner.scatter_reduce_(0, pix[win], pid[win], reduce="amin")
-    hit = owner < N
-    image = torch.zeros(height * width, C, dtype=rgb.dtype, device=dev)
-    image[hit] = rgb[owner[hit]]
-    return image.reshape(height, width, C), hit.reshape(height, width).to(xyz.dtype), depth.reshape(height, width)
+    return depth, owner
 
 
 def footprint_radius(xyz: torch.Tensor, viewmat: torch.Tensor, K: torch.Tensor, spacing_rad: float,

@@ -39,6 +39,10 @@ class Project:
         return subprocess.Popen(cmd, cwd=self.root, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True, **kw)
 
+    def store_record(self, summary, stage):
+        """The key record of ``stage`` in a run summary."""
+        return json.loads((self.store / "keys" / f"{summary['stages'][stage]['key']}.json").read_text())
+
     def how(self, summary):
         return {n: s["how"] for n, s in summary["stages"].items()}
 

@@ -8,6 +8,10 @@ import time
 
 from pathlib import Path
 
+import pytest
+
+LAUNCH = pytest.mark.parametrize("launch", [[], ["--cold"]], ids=["warm", "cold"])
+
 
 def _consistent(store):
     """Every object matches its name; every key record's outputs exist."""
@@ -21,16 +25,27 @@ def _consistent(store):
 
 
 def _children(pid):
-    """(pid, argv) of the processes whose parent is ``pid`` (from /proc; Linux)."""
+    """(pid, argv, comm) of the processes whose parent is ``pid`` (from /proc; Linux)."""
     out = []
     for stat_file in Path("/proc").glob("[0-9]*/stat"):
         try:
             fields = stat_file.read_text().rsplit(")", 1)[1].split()
             if int(fields[1]) == pid:
                 argv = (stat_file.parent / "cmdline").read_bytes().split(b"\0")
-                out.append((int(stat_file.parent.name), [a.decode() for a in argv if a]))
+                comm = (stat_file.parent / "comm").read_text().strip()
+                out.append((int(stat_file.parent.name), [a.decode() for a in argv if a], comm))
         except (OSError, IndexError, ValueError):
             pass
+    return out
+
+
+def _descendants(pid):
+    """_children of ``pid``, of its children, and so on."""
+    out, todo = [], [pid]
+    while todo:
+        found = _children(todo.pop())
+        out += found
+        todo += [p for p, _, _ in found]
     return out
 
 
@@ -43,11 +58,12 @@ def _alive(pid):
 
 
 def _wait_for_step(project, proc, stage, timeout=20.0):
-    """Wait until `stage`'s process runs under the runner; returns its pid."""
+    """Wait until `stage`'s process runs under the runner (exec'd, or forked from a warm template and
+    named after its program); returns its pid."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        for pid, argv in _children(proc.pid):
-            if any(a.endswith(f"{stage}.py") for a in argv):
+        for pid, argv, comm in _descendants(proc.pid):
+            if any(a.endswith(f"{stage}.py") for a in argv) or comm == f"{stage}.py"[:15]:
                 return pid
         assert proc.poll() is None, proc.communicate()
         time.sleep(0.02)
@@ -66,9 +82,10 @@ def _verify_ok(project, capsys):
     assert rc == 0 and "all match their hashes" in out
 
 
-def test_killed_step_is_redone_alone(project, capsys):
+@LAUNCH
+def test_killed_step_is_redone_alone(project, capsys, launch):
     project.run_json("p", capsys=capsys)
-    proc = project.proc("run", "--set", "upper.mode=title", "--set", "upper.sleep=30")
+    proc = project.proc("run", "--set", "upper.mode=title", "--set", "upper.sleep=30", *launch)
     os.kill(_wait_for_step(project, proc, "upper"), signal.SIGKILL)
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 1 and "stage 'upper' failed (killed by signal 9)" in err
@@ -78,17 +95,38 @@ def test_killed_step_is_redone_alone(project, capsys):
     assert project.how(s) == {"gen": "cached", "upper": "ran", "join": "ran"}
 
 
-def test_killed_runner_mid_step(project, capsys):
-    proc = project.proc("run", "p", "--set", "upper.sleep=30")
+@LAUNCH
+def test_killed_runner_mid_step(project, capsys, launch):
+    proc = project.proc("run", "p", "--set", "upper.sleep=30", *launch)
     step = _wait_for_step(project, proc, "upper")
+    others = [pid for pid, _, _ in _descendants(proc.pid)]
+    assert len(others) == (1 if launch else 2)  # the step (and its warm template)
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=10)
-    _wait_dead(step)                            # the step dies with its runner (no orphan)
+    for pid in others:
+        _wait_dead(pid)                         # the step dies with its runner (no orphan)
     _consistent(project.store)
     _verify_ok(project, capsys)
     s = project.run_json(capsys=capsys)
     assert project.how(s) == {"gen": "cached", "upper": "ran", "join": "ran"}
     assert list((project.store / "tmp").iterdir()) == []
+
+
+def test_killed_template_mid_step(project, capsys):
+    project.run_json("p", capsys=capsys)
+    proc = project.proc("run", "--set", "upper.mode=title", "--set", "upper.sleep=30")
+    step = _wait_for_step(project, proc, "upper")
+    template = [pid for pid, argv, _ in _children(proc.pid) if "holoflow.executors.template" in argv]
+    assert len(template) == 1 and step in [pid for pid, _, _ in _children(template[0])]
+    os.kill(template[0], signal.SIGKILL)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 1 and "stage 'upper' failed (killed by signal 9 (its warm template died))" in err
+    _wait_dead(step)                            # no orphan: the step died with its template
+    _consistent(project.store)
+    _verify_ok(project, capsys)
+    assert list((project.store / "tmp").iterdir()) == []
+    s = project.run_json("--set", "upper.mode=title", capsys=capsys)
+    assert project.how(s) == {"gen": "cached", "upper": "ran", "join": "ran"}
 
 
 def test_runner_killed_at_random_moments(project, capsys):
@@ -104,13 +142,16 @@ def test_runner_killed_at_random_moments(project, capsys):
     _verify_ok(project, capsys)
 
 
-def test_sigterm_stops_cleanly(project, capsys):
-    proc = project.proc("run", "p", "--set", "upper.sleep=30")
+@LAUNCH
+def test_sigterm_stops_cleanly(project, capsys, launch):
+    proc = project.proc("run", "p", "--set", "upper.sleep=30", *launch)
     step = _wait_for_step(project, proc, "upper")
+    others = [pid for pid, _, _ in _descendants(proc.pid)]
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=20)
     assert proc.returncode == 130 and "completed steps are kept" in err
-    _wait_dead(step)
+    for pid in [step, *others]:
+        _wait_dead(pid)
     assert list((project.store / "tmp").iterdir()) == []
     s = project.run_json(capsys=capsys)
     assert project.how(s)["gen"] == "cached"

@@ -116,6 +116,16 @@ def test_non_python_program(project, capsys):
     s = project.run_json("p", capsys=capsys)
     assert s["stages"]["shout"]["how"] == "ran"
     assert (project.store / "latest" / "shout" / "hello.txt").read_text() == "hello\n"
+    launch = {n: project.store_record(s, n)["provenance"]["launch"] for n in ("gen", "shout")}
+    assert launch == {"gen": "warm", "shout": "cold"}       # a non-Python program is always exec'd
+
+
+def test_cold_flag_and_env_exec_every_step(project, capsys, monkeypatch):
+    s = project.run_json("p", "--cold", capsys=capsys)
+    assert project.store_record(s, "gen")["provenance"]["launch"] == "cold"
+    monkeypatch.setenv("HOLOFLOW_COLD", "1")
+    s = project.run_json("--force", "all", capsys=capsys)
+    assert {project.store_record(s, n)["provenance"]["launch"] for n in s["stages"]} == {"cold"}
 
 
 def test_store_location(project, capsys, tmp_path, monkeypatch):
