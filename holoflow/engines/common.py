@@ -9,19 +9,19 @@ from typing import Callable
 
 import numpy as np
 
+from holoflow.imageops import color
+
 Progress = Callable[[int, int, str], None] | None
 
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    """sRGB OETF on linear values in [0, 1] (clipped)."""
-    x = np.clip(np.asarray(x, np.float32), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(np.float32)
+    """sRGB OETF on linear values in [0, 1] (clipped: networks take display values)."""
+    return color.linear_to_srgb(np.clip(x, 0.0, 1.0))
 
 
 def srgb_to_linear(x: np.ndarray) -> np.ndarray:
     """Inverse sRGB OETF on encoded values in [0, 1] (clipped)."""
-    x = np.clip(np.asarray(x, np.float32), 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4)).astype(np.float32)
+    return color.srgb_to_linear(np.clip(x, 0.0, 1.0))
 
 
 def report(progress: Progress, done: int, total: int, what: str) -> None:
