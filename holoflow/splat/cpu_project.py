@@ -114,12 +114,27 @@ def _project_fwd(means, quats, scales, opac, view, Ks, width, height, near, far,
             ext[c, n, 1] = kk * math.sqrt(cc) * 1.0001 + 1e-3
 
 
+@njit(cache=True)
+def _has_grad(valid, g_m2, g_con, g_depth, n):
+    """Whether Gaussian n receives any gradient through a camera where it is valid."""
+    for c in range(valid.shape[0]):
+        if valid[c, n] and (g_m2[c, n, 0] != 0.0 or g_m2[c, n, 1] != 0.0 or g_con[c, n, 0] != 0.0
+                            or g_con[c, n, 1] != 0.0 or g_con[c, n, 2] != 0.0 or g_depth[c, n] != 0.0):
+            return True
+    return False
+
+
 @njit(parallel=True, cache=True)
 def _project_bwd(means, quats, scales, view, Ks, width, height, valid, cov, g_m2, g_con, g_depth,
                  g_means, g_quats, g_scales):
     C = view.shape[0]
     N = means.shape[0]
     for n in prange(N):
+        if not _has_grad(valid, g_m2, g_con, g_depth, n):     # not drawn in any camera (most of them)
+            g_means[n, 0] = g_means[n, 1] = g_means[n, 2] = 0.0
+            g_scales[n, 0] = g_scales[n, 1] = g_scales[n, 2] = 0.0
+            g_quats[n, 0] = g_quats[n, 1] = g_quats[n, 2] = g_quats[n, 3] = 0.0
+            continue
         q, Rq, m, S = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
                                   scales[n, 0], scales[n, 1], scales[n, 2])
         gS = np.zeros(9)            # dL/dSigma, full 3x3 (symmetric)

@@ -45,16 +45,19 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
     else:
         proj = project_gaussians(means, quats, scales, viewmats, Ks, width, height, near, far)
         ext = pixel_extent(proj["cov2d"].detach(), ops.detach())                      # [C, N, 2]
-    if colors.dim() == 3:
-        campos = -torch.einsum("cji,cj->ci", viewmats[:, :3, :3], viewmats[:, :3, 3])   # [C, 3]
-        d = means[None] - campos[:, None]                                             # [C, N, 3]
-        d = d / torch.sqrt((d * d).sum(-1, keepdim=True).clamp_min(1e-24))
-        rgb = eval_sh(colors[None].expand(C, -1, -1, -1), d, sh_degree)               # [C, N, 3]
-    else:
-        rgb = colors[None].expand(C, -1, -1)                                           # [C, N, D]
-    D = rgb.shape[-1]
+    m2 = proj["means2d"].detach()
+    on_screen = ((m2 + ext >= 0) & (m2 - ext <= m2.new_tensor([width, height]))).all(-1)
+    drawn = proj["valid"] & on_screen & (ops.detach() >= 1 / 255)                      # [C, N]
+    radii = torch.where(drawn, ext.max(-1).values.ceil(), torch.zeros_like(ext[..., 0])).to(torch.int32)
+    # The fast path colours and composites only the Gaussians some camera can draw (a few % of a
+    # panorama's per view). ``drawn`` holds every Gaussian the tile culling keeps (its test is the
+    # looser one), the kept ones stay in index order, so the images are the same bytes.
+    sel = drawn.any(0).nonzero()[:, 0] if backend == "cpu" else slice(None)            # [n]
     depths = proj["depths"]
-    feats = torch.cat([rgb, depths[..., None], torch.ones_like(depths[..., None])], -1)  # [C, N, D+2]
+    rgb = _colors(means[sel], colors[sel], viewmats, sh_degree)                        # [C, n, D]
+    D = rgb.shape[-1]
+    d_sel = depths[:, sel]
+    feats = torch.cat([rgb, d_sel[..., None], torch.ones_like(d_sel[..., None])], -1)  # [C, n, D+2]
     if backend == "reference":
         from holoflow.splat.reference import composite_dense
 
@@ -63,18 +66,29 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
     else:
         from holoflow.splat.cpu import composite_cpu
 
-        out = composite_cpu(proj["means2d"], proj["conics"], ops, feats, depths, proj["valid"],
-                            ext, width, height)
-    m2 = proj["means2d"].detach()
-    on_screen = ((m2 + ext >= 0) & (m2 - ext <= m2.new_tensor([width, height]))).all(-1)
-    radii = torch.where(proj["valid"] & on_screen & (ops.detach() >= 1 / 255),
-                        ext.max(-1).values.ceil(), torch.zeros_like(ext[..., 0])).to(torch.int32)
+        out = composite_cpu(proj["means2d"][:, sel], proj["conics"][:, sel], ops[:, sel], feats, d_sel,
+                            proj["valid"][:, sel], ext[:, sel], width, height)
     alpha = out[..., D + 1:]
     color = out[..., :D]
     if background is not None:
         color = color + (1 - alpha) * background.to(color).reshape(-1, 1, 1, D)
     return dict(rgb=color, alpha=alpha, depth=out[..., D:D + 1],
                 meta=dict(means2d=proj["means2d"], radii=radii, depths=depths, backend=backend))
+
+
+def _colors(means: torch.Tensor, colors: torch.Tensor, viewmats: torch.Tensor,
+            sh_degree: int | None) -> torch.Tensor:
+    """Per-camera colours [C, N, D] of Gaussians at means [N, 3]: colors [N, D] as they are, or SH
+    [N, K, 3] evaluated towards each camera centre (degree 0 needs no direction)."""
+    C = viewmats.shape[0]
+    if colors.dim() == 2:
+        return colors[None].expand(C, -1, -1)
+    if sh_degree == 0:
+        return eval_sh(colors[:, :1], means, 0)[None].expand(C, -1, -1)
+    campos = -torch.einsum("cji,cj->ci", viewmats[:, :3, :3], viewmats[:, :3, 3])       # [C, 3]
+    d = means[None] - campos[:, None]                                                 # [C, N, 3]
+    d = d / torch.sqrt((d * d).sum(-1, keepdim=True).clamp_min(1e-24))
+    return eval_sh(colors[None].expand(C, -1, -1, -1), d, sh_degree)                   # [C, N, 3]
 
 
 def render(model, viewmats: torch.Tensor, Ks: torch.Tensor, width: int, height: int,

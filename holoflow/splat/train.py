@@ -34,7 +34,7 @@ class TrainConfig:
     lr_scaling: float = 5e-3
     lr_rotation: float = 1e-3
     lambda_dssim: float = 0.2
-    """Loss = (1 - lambda) L1 + lambda (1 - SSIM), SSIM with an 11 px Gaussian window (kornia)."""
+    """Loss = (1 - lambda) L1 + lambda (1 - SSIM), SSIM with an 11 px Gaussian window (metrics.ssim_map)."""
     densify_every: int = 100
     densify_from: int = 500
     """Densify at steps it > densify_from with it % densify_every == 0 ..."""
@@ -87,7 +87,7 @@ def masked_loss(rgb: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | No
     """(1 - l) L1 + l (1 - SSIM) over supervised pixels. rgb, target [H, W, 3]; mask [H, W] (1 =
     supervise) or None. Unsupervised target pixels are replaced by the (detached) render, so SSIM
     windows that straddle a hole compare nothing invented."""
-    import kornia
+    from holoflow.metrics import ssim_map
 
     m = torch.ones_like(rgb[..., :1]) if mask is None else mask.to(rgb).reshape(*rgb.shape[:2], 1)
     target = m * target + (1 - m) * rgb.detach()
@@ -95,7 +95,7 @@ def masked_loss(rgb: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | No
     l1 = ((rgb - target).abs() * m).sum() / denom
     if lambda_dssim == 0:
         return l1
-    ssim = kornia.metrics.ssim(rgb.permute(2, 0, 1)[None], target.permute(2, 0, 1)[None], 11)
+    ssim = ssim_map(rgb.permute(2, 0, 1)[None], target.permute(2, 0, 1)[None], 11)
     ssim = (ssim[0].permute(1, 2, 0) * m).sum() / denom
     return (1 - lambda_dssim) * l1 + lambda_dssim * (1 - ssim)
 

