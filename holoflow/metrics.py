@@ -69,14 +69,16 @@ def ssim_map(a: torch.Tensor, b: torch.Tensor, window_size: int = 11, max_val: f
 
 
 def ssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11, max_val: float = 1.0) -> float:
-    """Mean structural similarity (``ssim_map``, computed in float64) of images [..., H, W, 3] in
-    [0, max_val]. Windows are clipped to the image for images smaller than ``window_size``."""
+    """Mean structural similarity (``ssim_map`` in float32, averaged in float64) of images
+    [..., H, W, 3] in [0, max_val]. Windows are clipped to the image for images smaller than
+    ``window_size``. float32 filtering is 11x faster than float64 on the CPU (38 views of 128 px:
+    0.17 vs 1.9 s) and moves the mean by about 1e-9 (tests/recon/test_metrics.py)."""
     h, w = pred.shape[-3], pred.shape[-2]
     win = max(1, min(window_size, h, w))
     win -= 1 - win % 2                                                 # an odd window
-    a = pred.reshape(-1, h, w, pred.shape[-1]).permute(0, 3, 1, 2).double()   # [B, C, H, W]
-    b = target.reshape(-1, h, w, target.shape[-1]).permute(0, 3, 1, 2).double()
-    return float(ssim_map(a, b, win, max_val=max_val).mean())
+    a = pred.reshape(-1, h, w, pred.shape[-1]).permute(0, 3, 1, 2).float()    # [B, C, H, W]
+    b = target.reshape(-1, h, w, target.shape[-1]).permute(0, 3, 1, 2).float()
+    return float(ssim_map(a, b, win, max_val=max_val).double().mean())
 
 
 def empty_fraction(alpha: torch.Tensor, threshold: float = 0.5) -> float:

@@ -80,7 +80,7 @@ def run_one(n: int, size: int, repeat: int, ref_mem_gb: float, threads: int | No
         feats = torch.cat([sc["colors"], pr["depths"][0, :, None], torch.ones(n, 1)], 1).numpy()
         pairs = float(count_pairs(pr["means2d"].numpy()[0].astype(np.float64), pr["conics"].numpy()[0],
                                   sc["opacities"].numpy(), feats, pr["depths"].numpy()[0],
-                                  pr["valid"].numpy()[0], pr["ext"][0].numpy().astype(np.float64), size, size))
+                                  pr["drawn"].numpy()[0], pr["ext"][0].numpy().astype(np.float64), size, size))
     row["pairs"] = pairs
     row["gaussians_per_pixel"] = pairs / size ** 2
     ref_bytes = 12 * 4 * size * size * n             # ~12 float32 [P, N] tensors kept for backward

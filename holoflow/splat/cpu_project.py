@@ -77,25 +77,50 @@ def _dot(a, b):
 
 
 @njit(parallel=True, cache=True)
-def _project_fwd(means, quats, scales, opac, view, Ks, width, height, near, far,
-                 m2, con, cov, depth, valid, ext):
-    """Outputs per camera c and Gaussian n: m2 [C, N, 2], con [C, N, 3], cov [C, N, 3], depth [C, N],
-    valid [C, N] (near < z < far), ext [C, N, 2] (reach of alpha >= 1/255, px)."""
+def _project_fwd(means, quats, scales, opac, view, Ks, width, height, near, far, min_opacity,
+                 m2, con, cov, depth, valid, ext, drawn, radii):
+    """Outputs per camera c and Gaussian n: m2 [C, N, 2], depth [C, N], valid [C, N] (near < z < far),
+    drawn [C, N] (valid, opacity >= ``min_opacity`` and the reach meets the image: what the tile
+    culling can keep), radii [C, N] int32 (ceil of the larger reach where drawn, else 0); con [C, N, 3],
+    cov [C, N, 3] and ext [C, N, 2] (reach of alpha >= 1/255, px) where drawn.
+
+    A Gaussian that is invalid, too transparent, or whose centre lies farther off the image than a
+    cheap bound on its reach is not drawn and skips the covariance math (a view of a panorama draws a
+    few % of them): con and cov are 0 there and ext holds the bound. The bound: the reach along x is
+    k sqrt(r0' Sigma r0 + 0.3) with r0 = fx/z (R0 - u R2) and r0' Sigma r0 <= |r0|^2 tr(Sigma)."""
     C = view.shape[0]
     N = means.shape[0]
     for n in prange(N):
-        _, _, _, S = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
-                                 scales[n, 0], scales[n, 1], scales[n, 2])
         kk = math.sqrt(2.0 * math.log(max(opac[n] / ALPHA_MIN, 1.0)))
+        tr = scales[n, 0] * scales[n, 0] + scales[n, 1] * scales[n, 1] + scales[n, 2] * scales[n, 2]
+        S = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        have_sigma = False
         for c in range(C):
             x, y, z, fx, fy, cx, cy, lim = _camera(view, Ks, c, means, n, width, height)
             ok = z > near and z < far
             valid[c, n] = ok
             if not ok:
                 z = 1.0
+            m2[c, n, 0] = fx * x / z + cx
+            m2[c, n, 1] = fy * y / z + cy
+            depth[c, n] = z
             u = min(max(x / z, lim[0]), lim[1])
             v = min(max(y / z, lim[2]), lim[3])
             r0, r1 = _rows(view, c, fx, fy, z, u, v)
+            bx = kk * math.sqrt(_dot(r0, r0) * tr + EPS2D) * 1.0002 + 1e-3    # >= ex below, rounding too
+            by = kk * math.sqrt(_dot(r1, r1) * tr + EPS2D) * 1.0002 + 1e-3
+            mx, my = m2[c, n, 0], m2[c, n, 1]       # as stored (the tests below read these)
+            if not (ok and opac[n] >= min_opacity and _meets(mx, my, bx, by, width, height)):
+                drawn[c, n] = False
+                radii[c, n] = 0
+                con[c, n, 0] = con[c, n, 1] = con[c, n, 2] = 0.0
+                cov[c, n, 0] = cov[c, n, 1] = cov[c, n, 2] = 0.0
+                ext[c, n, 0], ext[c, n, 1] = bx, by
+                continue
+            if not have_sigma:
+                _, _, _, S = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
+                                         scales[n, 0], scales[n, 1], scales[n, 2])
+                have_sigma = True
             s1 = _symv(S, r1)
             a = _dot(r0, _symv(S, r0)) + EPS2D
             b = _dot(r0, s1)
@@ -107,30 +132,38 @@ def _project_fwd(means, quats, scales, opac, view, Ks, width, height, near, far,
             cov[c, n, 0] = a
             cov[c, n, 1] = b
             cov[c, n, 2] = cc
-            m2[c, n, 0] = fx * x / z + cx
-            m2[c, n, 1] = fy * y / z + cy
-            depth[c, n] = z
-            ext[c, n, 0] = kk * math.sqrt(a) * 1.0001 + 1e-3
-            ext[c, n, 1] = kk * math.sqrt(cc) * 1.0001 + 1e-3
+            ex = kk * math.sqrt(a) * 1.0001 + 1e-3
+            ey = kk * math.sqrt(cc) * 1.0001 + 1e-3
+            ext[c, n, 0], ext[c, n, 1] = ex, ey
+            hit = _meets(mx, my, ex, ey, width, height)
+            drawn[c, n] = hit
+            radii[c, n] = math.ceil(max(ex, ey)) if hit else 0
+
+
+@njit(cache=True, inline="always")
+def _meets(mx, my, ex, ey, width, height):
+    """Whether the box of half-size (ex, ey) px around (mx, my) meets the image [0, W] x [0, H]."""
+    return mx + ex >= 0.0 and my + ey >= 0.0 and mx - ex <= width and my - ey <= height
 
 
 @njit(cache=True)
-def _has_grad(valid, g_m2, g_con, g_depth, n):
-    """Whether Gaussian n receives any gradient through a camera where it is valid."""
-    for c in range(valid.shape[0]):
-        if valid[c, n] and (g_m2[c, n, 0] != 0.0 or g_m2[c, n, 1] != 0.0 or g_con[c, n, 0] != 0.0
+def _has_grad(drawn, g_m2, g_con, g_depth, n):
+    """Whether Gaussian n receives any gradient through a camera that draws it."""
+    for c in range(drawn.shape[0]):
+        if drawn[c, n] and (g_m2[c, n, 0] != 0.0 or g_m2[c, n, 1] != 0.0 or g_con[c, n, 0] != 0.0
                             or g_con[c, n, 1] != 0.0 or g_con[c, n, 2] != 0.0 or g_depth[c, n] != 0.0):
             return True
     return False
 
 
 @njit(parallel=True, cache=True)
-def _project_bwd(means, quats, scales, view, Ks, width, height, valid, cov, g_m2, g_con, g_depth,
+def _project_bwd(means, quats, scales, view, Ks, width, height, drawn, cov, g_m2, g_con, g_depth,
                  g_means, g_quats, g_scales):
+    """Gradients through the cameras that draw each Gaussian (the others' outputs are not computed)."""
     C = view.shape[0]
     N = means.shape[0]
     for n in prange(N):
-        if not _has_grad(valid, g_m2, g_con, g_depth, n):     # not drawn in any camera (most of them)
+        if not _has_grad(drawn, g_m2, g_con, g_depth, n):     # not drawn in any camera (most of them)
             g_means[n, 0] = g_means[n, 1] = g_means[n, 2] = 0.0
             g_scales[n, 0] = g_scales[n, 1] = g_scales[n, 2] = 0.0
             g_quats[n, 0] = g_quats[n, 1] = g_quats[n, 2] = g_quats[n, 3] = 0.0
@@ -140,7 +173,7 @@ def _project_bwd(means, quats, scales, view, Ks, width, height, valid, cov, g_m2
         gS = np.zeros(9)            # dL/dSigma, full 3x3 (symmetric)
         gmx = gmy = gmz = 0.0
         for c in range(C):
-            if not valid[c, n]:
+            if not drawn[c, n]:
                 continue
             x, y, z, fx, fy, cx, cy, lim = _camera(view, Ks, c, means, n, width, height)
             ux, uy = x / z, y / z
@@ -213,31 +246,36 @@ class _ProjectCPU(torch.autograd.Function):
         a = [t.detach().to(dt).contiguous().numpy() for t in (means, quats, scales, opacities, viewmats, Ks)]
         m2, con, cov = np.empty((C, N, 2), a[0].dtype), np.empty((C, N, 3), a[0].dtype), np.empty((C, N, 3), np.float64)
         depth, valid, ext = np.empty((C, N), a[0].dtype), np.empty((C, N), np.bool_), np.empty((C, N, 2))
+        drawn, radii = np.empty((C, N), np.bool_), np.empty((C, N), np.int32)
+        min_opacity = float(np.asarray(ALPHA_MIN, a[3].dtype))    # 1/255 as the opacities' dtype rounds it
         fwd = _project_fwd if C * N >= PARALLEL_MIN_WORK else _project_fwd_serial
-        fwd(*a, width, height, near, far, m2, con, cov, depth, valid, ext)
-        ctx.saved = (a, width, height, valid, cov)
-        valid_t, cov_t, ext_t = torch.from_numpy(valid), torch.from_numpy(cov), torch.from_numpy(ext)
-        ctx.mark_non_differentiable(valid_t, cov_t, ext_t)
-        return torch.from_numpy(m2), torch.from_numpy(con), torch.from_numpy(depth), valid_t, cov_t, ext_t
+        fwd(*a, width, height, near, far, min_opacity, m2, con, cov, depth, valid, ext, drawn, radii)
+        ctx.saved = (a, width, height, drawn, cov)
+        const = [torch.from_numpy(x) for x in (valid, cov, ext, drawn, radii)]
+        ctx.mark_non_differentiable(*const)
+        return (torch.from_numpy(m2), torch.from_numpy(con), torch.from_numpy(depth), *const)
 
     @staticmethod
-    def backward(ctx, g_m2, g_con, g_depth, _v, _c, _e):
-        (means, quats, scales, _op, view, Ks), width, height, valid, cov = ctx.saved
+    def backward(ctx, g_m2, g_con, g_depth, *_):
+        (means, quats, scales, _op, view, Ks), width, height, drawn, cov = ctx.saved
         N = means.shape[0]
         prep = lambda g, shape: (np.zeros(shape, means.dtype) if g is None  # noqa: E731
                                  else g.detach().to(torch.from_numpy(means).dtype).contiguous().numpy())
         C = view.shape[0]
         gm, gq, gs = np.empty_like(means), np.empty_like(quats), np.empty_like(scales)
         bwd = _project_bwd if C * N >= PARALLEL_MIN_WORK else _project_bwd_serial
-        bwd(means, quats, scales, view, Ks, width, height, valid, cov,
-                     prep(g_m2, (C, N, 2)), prep(g_con, (C, N, 3)), prep(g_depth, (C, N)), gm, gq, gs)
+        bwd(means, quats, scales, view, Ks, width, height, drawn, cov,
+            prep(g_m2, (C, N, 2)), prep(g_con, (C, N, 3)), prep(g_depth, (C, N)), gm, gq, gs)
         return (torch.from_numpy(gm), torch.from_numpy(gq), torch.from_numpy(gs),
                 None, None, None, None, None, None, None)
 
 
 def project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, near, far) -> dict:
-    """Fast projection, same outputs as ``project.project_gaussians`` plus ``ext`` [C, N, 2]
-    (``project.pixel_extent``); differentiable w.r.t. means, quats and scales."""
-    m2, con, depth, valid, cov, ext = _ProjectCPU.apply(means, quats, scales, opacities, viewmats, Ks,
-                                                        width, height, float(near), float(far))
-    return dict(means2d=m2, conics=con, depths=depth, valid=valid, cov2d=cov, ext=ext)
+    """Fast projection for the tile compositor: ``project.project_gaussians``' outputs plus ``ext``
+    [C, N, 2] (``project.pixel_extent``), ``drawn`` [C, N] and ``radii`` [C, N] int32 (see
+    ``_project_fwd``). means2d, depths and valid are computed for every Gaussian; conics, cov2d and ext
+    only where drawn (conics and cov2d are 0 elsewhere). Differentiable w.r.t. means, quats and scales
+    through the cameras that draw each Gaussian."""
+    m2, con, depth, valid, cov, ext, drawn, radii = _ProjectCPU.apply(
+        means, quats, scales, opacities, viewmats, Ks, width, height, float(near), float(far))
+    return dict(means2d=m2, conics=con, depths=depth, valid=valid, cov2d=cov, ext=ext, drawn=drawn, radii=radii)

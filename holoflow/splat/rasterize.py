@@ -41,14 +41,14 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
         from holoflow.splat.cpu_project import project_cpu
 
         proj = project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, near, far)
-        ext = proj["ext"]
+        ext, drawn, radii = proj["ext"], proj["drawn"], proj["radii"]                  # the same tests, fused
     else:
         proj = project_gaussians(means, quats, scales, viewmats, Ks, width, height, near, far)
         ext = pixel_extent(proj["cov2d"].detach(), ops.detach())                      # [C, N, 2]
-    m2 = proj["means2d"].detach()
-    on_screen = ((m2 + ext >= 0) & (m2 - ext <= m2.new_tensor([width, height]))).all(-1)
-    drawn = proj["valid"] & on_screen & (ops.detach() >= 1 / 255)                      # [C, N]
-    radii = torch.where(drawn, ext.max(-1).values.ceil(), torch.zeros_like(ext[..., 0])).to(torch.int32)
+        m2 = proj["means2d"].detach()
+        on_screen = ((m2 + ext >= 0) & (m2 - ext <= m2.new_tensor([width, height]))).all(-1)
+        drawn = proj["valid"] & on_screen & (ops.detach() >= 1 / 255)                  # [C, N]
+        radii = torch.where(drawn, ext.max(-1).values.ceil(), torch.zeros_like(ext[..., 0])).to(torch.int32)
     # The fast path colours and composites only the Gaussians some camera can draw (a few % of a
     # panorama's per view). ``drawn`` holds every Gaussian the tile culling keeps (its test is the
     # looser one), the kept ones stay in index order, so the images are the same bytes.
@@ -67,7 +67,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
         from holoflow.splat.cpu import composite_cpu
 
         out = composite_cpu(proj["means2d"][:, sel], proj["conics"][:, sel], ops[:, sel], feats, d_sel,
-                            proj["valid"][:, sel], ext[:, sel], width, height)
+                            drawn[:, sel], ext[:, sel], width, height)
     alpha = out[..., D + 1:]
     color = out[..., :D]
     if background is not None:

@@ -118,7 +118,11 @@ def _alive(pid):
 
 
 def test_preload_keeps_heavy_third_party_modules_only():
-    assert preload(["torch.nn", "numpy", "json", "diffusers", "holoflow.stage"]) == ["numpy", "torch.nn"]
+    assert preload(["numpy", "json", "diffusers", "holoflow.stage"]) == ["numpy"]
+
+
+def test_preload_adds_what_torch_loads_on_first_use():
+    assert preload(["torch.nn", "numpy"]) == ["numpy", "torch._dynamo", "torch.nn"]
 
 
 def test_step_env_sets_threads_and_a_passive_wait_policy(monkeypatch):

@@ -72,3 +72,12 @@ def test_ssim_map_gradcheck():
     a = torch.rand(1, 2, 9, 8, generator=g, dtype=torch.float64, requires_grad=True)
     b = torch.rand(1, 2, 9, 8, generator=g, dtype=torch.float64, requires_grad=True)
     assert torch.autograd.gradcheck(lambda x, y: metrics.ssim_map(x, y, 5), (a, b))
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e-3, 0.1])
+def test_ssim_in_float32_agrees_with_float64(noise):
+    g = torch.Generator().manual_seed(5)
+    a = torch.rand(6, 64, 48, 3, generator=g, dtype=torch.float64)
+    b = (a + noise * torch.randn(a.shape, generator=g, dtype=torch.float64)).clamp(0, 1)
+    exact = float(metrics.ssim_map(a.permute(0, 3, 1, 2), b.permute(0, 3, 1, 2)).mean())
+    assert metrics.ssim(a, b) == pytest.approx(exact, abs=1e-6)

@@ -234,3 +234,35 @@ def test_fast_matches_reference_when_most_gaussians_are_out_of_view(dtype):
     for k in NAMES:
         scale = gref[k].abs().max().clamp_min(1.0)
         torch.testing.assert_close(gfast[k] / scale, gref[k] / scale, **gtol)
+
+
+def test_fast_projection_draws_what_the_reference_tests_draw(dtype):
+    # project_cpu skips the covariance of Gaussians that a cheap bound puts off the image; large ones
+    # centred outside the view whose reach enters it must still be drawn, in every camera.
+    from holoflow.splat.cpu_project import project_cpu
+    from holoflow.splat.project import pixel_extent, project_gaussians
+
+    p = {k: v.detach() for k, v in random_scene(600, 11, dtype).items()}
+    g = torch.Generator().manual_seed(11)
+    big = torch.rand(600, generator=g) < 0.3
+    p["scales"][big] *= 8                                    # reach tens of px past their centres
+    p["means"][:, :2] *= 3                                    # many centres off-screen
+    W, H = 40, 30
+    vm, K = cameras(W, H, dtype, n=3)
+    fast = project_cpu(p["means"], p["quats"], p["scales"], p["opacities"], vm, K, W, H, 0.01, 1e10)
+    ref = project_gaussians(p["means"], p["quats"], p["scales"], vm, K, W, H, 0.01, 1e10)
+    ops = p["opacities"][None].expand(3, -1)
+    ext = pixel_extent(ref["cov2d"], ops)
+    m2 = ref["means2d"]
+    drawn = ref["valid"] & ((m2 + ext >= 0) & (m2 - ext <= m2.new_tensor([W, H]))).all(-1) & (ops >= 1 / 255)
+    assert torch.equal(fast["drawn"], drawn)
+    outside = drawn & ((m2 < 0) | (m2 > m2.new_tensor([W, H]))).any(-1)
+    assert int(outside.sum()) > 10 and int((~drawn).sum()) > 100       # the cases this test is about
+    radii = torch.where(drawn, ext.max(-1).values.ceil(), torch.zeros_like(ext[..., 0])).to(torch.int32)
+    assert torch.equal(fast["radii"], radii)
+    tol = dict(rtol=1e-9, atol=1e-9) if dtype == torch.float64 else dict(rtol=1e-4, atol=1e-4)
+    torch.testing.assert_close(fast["ext"][drawn], ext[drawn].double(), **tol)
+    torch.testing.assert_close(fast["conics"][drawn], ref["conics"][drawn], **tol)
+    skipped = ~drawn & ref["valid"]                            # ext holds a bound on the reach there
+    slack = 1e-9 if dtype == torch.float64 else 1e-5
+    assert (fast["ext"][skipped] >= ext[skipped].double() * (1 - slack)).all()
