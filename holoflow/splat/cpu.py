@@ -146,6 +146,16 @@ def _row_span(rec, pbox, p, py, px0, px1):
 
 
 @njit(cache=True, inline="always")
+def _row_exp(ca, cb, sy, dx, dy):
+    """exp(-sigma) at the first pixel of a row span (offset dx, dy from the centre) and the ratio
+    exp(-(sigma(dx + 1) - sigma(dx))) to the next one. Along a row sigma is quadratic in dx, so
+    exp(-sigma) steps by a ratio r that itself steps by q = exp(-a): two products a pixel instead of
+    an exp (a third of the compositing time), the same values in the forward and backward passes.
+    Spans are at most a tile (16 px) long, so the products drift by a few ulps at most."""
+    return math.exp(-((0.5 * ca * dx + cb * dy) * dx + sy)), math.exp(-(ca * dx + 0.5 * ca + cb * dy))
+
+
+@njit(cache=True, inline="always")
 def _tile_origin(t, width):
     ntx = (width + TILE - 1) // TILE
     return (t % ntx) * TILE, (t // ntx) * TILE
@@ -170,12 +180,17 @@ def _forward(rec, pbox, ft, offsets, ids, width, height, out, t_final, n_last, e
         for k in range(s, e):
             p = ids[k]
             mx, ca, cb, cc, op, bound = rec[p, 0], rec[p, 2], rec[p, 3], rec[p, 4], rec[p, 5], rec[p, 6]
+            q = math.exp(-ca)
             for py in range(max(oy, pbox[p, 2]), min(oy + th - 1, pbox[p, 3]) + 1):
                 lo, hi, dy = _row_span(rec, pbox, p, py, ox, ox + tw - 1)
                 ev += max(hi - lo + 1, 0)
                 j = py - oy
                 sy = 0.5 * cc * dy * dy
+                e_next, r = _row_exp(ca, cb, sy, lo + 0.5 - mx, dy)
                 for px in range(lo, hi + 1):
+                    ex = e_next                 # exp(-sigma) at px
+                    e_next *= r
+                    r *= q
                     i = px - ox
                     if done[j, i]:
                         continue
@@ -183,7 +198,7 @@ def _forward(rec, pbox, ft, offsets, ids, width, height, out, t_final, n_last, e
                     sig = (0.5 * ca * dx + cb * dy) * dx + sy
                     if sig < 0.0 or sig > bound:
                         continue
-                    a = min(ALPHA_MAX, op * math.exp(-sig))
+                    a = min(ALPHA_MAX, op * ex)
                     if a < ALPHA_MIN:
                         continue
                     t_next = T[j, i] * (1.0 - a)
@@ -228,13 +243,18 @@ def _backward(rec, pbox, ft, offsets, ids, width, height, t_final, n_last, g_out
         for k in range(stop - 1, s - 1, -1):
             p = ids[k]
             mx, ca, cb, cc, op, bound = rec[p, 0], rec[p, 2], rec[p, 3], rec[p, 4], rec[p, 5], rec[p, 6]
+            q = math.exp(-ca)
             gm0 = gm1 = gc0 = gc1 = gc2 = go = 0.0
             gft[:] = 0.0
             for py in range(max(oy, pbox[p, 2]), min(oy + th - 1, pbox[p, 3]) + 1):
                 lo, hi, dy = _row_span(rec, pbox, p, py, ox, ox + tw - 1)
                 j = py - oy
                 sy = 0.5 * cc * dy * dy
+                e_next, r = _row_exp(ca, cb, sy, lo + 0.5 - mx, dy)
                 for px in range(lo, hi + 1):
+                    ex = e_next                 # exp(-sigma) at px, as the forward pass had it
+                    e_next *= r
+                    r *= q
                     if k >= n_last[py, px]:
                         continue
                     i = px - ox
@@ -242,7 +262,6 @@ def _backward(rec, pbox, ft, offsets, ids, width, height, t_final, n_last, g_out
                     sig = (0.5 * ca * dx + cb * dy) * dx + sy
                     if sig < 0.0 or sig > bound:
                         continue
-                    ex = math.exp(-sig)
                     a_raw = op * ex
                     a = min(ALPHA_MAX, a_raw)
                     if a < ALPHA_MIN:
