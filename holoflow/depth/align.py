@@ -33,6 +33,7 @@ METHODS = ("median", "affine", "grid")
 MIN_VALID = 8  # a face with fewer valid pixels is dropped
 REL_FLOOR = 0.05  # relative residuals divide by disparity + this fraction of its 90th percentile
 HUBER_MIN = 0.02  # smallest Huber threshold on a relative residual
+PERMC = "MMD_AT_PLUS_A"  # SuperLU column order: minimum degree on A' + A, suited to the symmetric normal matrix
 
 
 @dataclass
@@ -207,17 +208,20 @@ def _solve(d, valid, ov: Overlaps, face_ok, grid, smoothness, scale_reg, prior, 
             reg_rows.append(_smoothness_rows(F, cols, rows) * np.sqrt(smoothness / n_nodes))
             reg_rhs.append(np.zeros(reg_rows[-1].shape[0]))
     reg = sp.vstack(reg_rows).tocsr()
-    reg_b = np.concatenate(reg_rhs)
+    # normal equations (D' W D + R' R + 1e-12 I) x = R' b_reg (the data rows have a zero right side);
+    # the regulariser's part is the same in every robust iteration
+    RtR = (reg.T @ reg).tocsr() + sp.identity(n, format="csr") * 1e-12
+    Rtb = reg.T @ np.concatenate(reg_rhs)
 
     # data weight: mean over pairs, scaled to the number of faces so the regularisers stay comparable
     base = np.sqrt(F / max(P, 1))
     wts = np.ones(P)
     x = np.zeros(n)
     for it in range(max(robust_iters, 0) + 1):
-        A = sp.vstack([sp.diags(base * wts) @ data, reg]).tocsr()
-        b = np.concatenate([np.zeros(P), reg_b])
-        AtA = (A.T @ A).tocsc() + sp.identity(n, format="csc") * 1e-12
-        x = spla.spsolve(AtA, A.T @ b)
+        dw = data.copy()                                                      # rows weighted
+        dw.data *= np.repeat(base * wts, np.diff(data.indptr))
+        AtA = (dw.T @ dw + RtR).tocsc()
+        x = spla.spsolve(AtA, Rtb, permc_spec=PERMC)
         if it == robust_iters or P == 0:
             break
         # relative residuals (far pixels, with small disparities, pin the offsets as much as near ones
