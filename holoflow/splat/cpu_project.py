@@ -253,6 +253,7 @@ class _ProjectCPU(torch.autograd.Function):
         ctx.saved = (a, width, height, drawn, cov)
         const = [torch.from_numpy(x) for x in (valid, cov, ext, drawn, radii)]
         ctx.mark_non_differentiable(*const)
+        ctx.set_materialize_grads(False)    # no zero-filled [C, N] gradients for the constant outputs
         return (torch.from_numpy(m2), torch.from_numpy(con), torch.from_numpy(depth), *const)
 
     @staticmethod

@@ -33,7 +33,9 @@ class GaussianModel:
 
     @property
     def sh(self) -> torch.Tensor:
-        """All SH coefficients [N, K, 3]."""
+        """All SH coefficients [N, K, 3] (``sh_dc`` itself at degree 0: no copy, the same gradient)."""
+        if self.sh_rest.shape[1] == 0:
+            return self.sh_dc
         return torch.cat([self.sh_dc, self.sh_rest], 1)
 
     def __len__(self) -> int:
