@@ -12,7 +12,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
               opacities: torch.Tensor, colors: torch.Tensor, viewmats: torch.Tensor,
               Ks: torch.Tensor, width: int, height: int, near: float = 0.01, far: float = 1e10,
               background: torch.Tensor | None = None, backend: str = "auto",
-              sh_degree: int | None = None) -> dict:
+              sh_degree: int | None = None, depth: bool = True) -> dict:
     """Render activated Gaussians into C pinhole cameras.
 
     means [N, 3] world metres; quats [N, 4] (w, x, y, z), normalised inside (zero -> identity);
@@ -23,7 +23,8 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
     backend: "reference" (dense torch), "cpu" (tiles + numba), "gsplat" (CUDA), "auto" (gsplat for
     CUDA tensors, else cpu).
     Returns dict(rgb [C, H, W, D], alpha [C, H, W, 1], depth [C, H, W, 1] = sum_i w_i z_i (accumulated
-    camera z, metres; divide by alpha for the expected depth), meta = dict(means2d [C, N, 2] (keeps its
+    camera z, metres; divide by alpha for the expected depth; None with ``depth=False``, which spares
+    the compositing a channel: training needs none), meta = dict(means2d [C, N, 2] (keeps its
     gradient for densification statistics), radii [C, N] int (0 = not drawn), depths [C, N]))."""
     if backend not in BACKENDS:
         raise ValueError(f"rasterize: unknown backend {backend!r}, expected one of {BACKENDS}")
@@ -32,7 +33,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
         backend = "gsplat" if means.is_cuda else "cpu"
     if backend == "gsplat":
         return _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height,
-                                 near, far, background, sh_degree)
+                                 near, far, background, sh_degree, depth)
     if backend == "cpu" and means.device.type != "cpu":
         raise ValueError(f"rasterize: backend 'cpu' needs CPU tensors, got {means.device}")
     C, N = viewmats.shape[0], means.shape[0]
@@ -57,7 +58,8 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
     rgb = _colors(means[sel], colors[sel], viewmats, sh_degree)                        # [C, n, D]
     D = rgb.shape[-1]
     d_sel = depths[:, sel]
-    feats = torch.cat([rgb, d_sel[..., None], torch.ones_like(d_sel[..., None])], -1)  # [C, n, D+2]
+    extra = [d_sel[..., None]] if depth else []
+    feats = torch.cat([rgb, *extra, torch.ones_like(d_sel[..., None])], -1)           # [C, n, D+1(+1)]
     if backend == "reference":
         from holoflow.splat.reference import composite_dense
 
@@ -68,11 +70,11 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
 
         out = composite_cpu(proj["means2d"][:, sel], proj["conics"][:, sel], ops[:, sel], feats, d_sel,
                             drawn[:, sel], ext[:, sel], width, height)
-    alpha = out[..., D + 1:]
+    alpha = out[..., -1:]
     color = out[..., :D]
     if background is not None:
         color = color + (1 - alpha) * background.to(color).reshape(-1, 1, 1, D)
-    return dict(rgb=color, alpha=alpha, depth=out[..., D:D + 1],
+    return dict(rgb=color, alpha=alpha, depth=out[..., D:D + 1] if depth else None,
                 meta=dict(means2d=proj["means2d"], radii=radii, depths=depths, backend=backend))
 
 
@@ -120,7 +122,7 @@ def _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, width, 
 
 
 def _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near,
-                      far, background, sh_degree):
+                      far, background, sh_degree, depth):
     try:
         from gsplat import rasterization
     except ImportError as exc:
@@ -132,14 +134,14 @@ def _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, wid
     rc, ra, meta = rasterization(means, quats, scales, opacities, colors, viewmats, Ks, width, height,
                                  near_plane=near, far_plane=far, eps2d=0.3,
                                  sh_degree=sh_degree if sh else None, packed=False,
-                                 render_mode="RGB+D", rasterize_mode="classic",
+                                 render_mode="RGB+D" if depth else "RGB", rasterize_mode="classic",
                                  camera_model="pinhole")
-    color, depth = rc[..., :-1], rc[..., -1:]
+    color, z = (rc[..., :-1], rc[..., -1:]) if depth else (rc, None)
     if background is not None:
         color = color + (1 - ra) * background.to(color).reshape(-1, 1, 1, color.shape[-1])
     radii = meta["radii"]
     if radii.dim() == 3:                                  # gsplat >= 1.5: per-axis radii [C, N, 2]
         radii = radii.max(-1).values
-    return dict(rgb=color, alpha=ra, depth=depth,
+    return dict(rgb=color, alpha=ra, depth=z,
                 meta=dict(means2d=meta["means2d"], radii=radii.to(torch.int32), depths=meta["depths"],
                           backend="gsplat"))

@@ -147,7 +147,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
         H, W = image.shape[:2]
         sh_degree = min(model.sh_degree, (cfg.step_offset + it - 1) // max(cfg.sh_degree_every, 1))
         out = render(model, viewmats[order_i][None], v["K"][None], W, H, backend=cfg.backend,
-                     background=bg, sh_degree=sh_degree)
+                     background=bg, sh_degree=sh_degree, depth=False)
         means2d = out["meta"]["means2d"]
         if means2d.requires_grad:
             means2d.retain_grad()

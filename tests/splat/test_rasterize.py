@@ -266,3 +266,20 @@ def test_fast_projection_draws_what_the_reference_tests_draw(dtype):
     skipped = ~drawn & ref["valid"]                            # ext holds a bound on the reach there
     slack = 1e-9 if dtype == torch.float64 else 1e-5
     assert (fast["ext"][skipped] >= ext[skipped].double() * (1 - slack)).all()
+
+
+@pytest.mark.parametrize("backend", ["reference", "cpu"])
+def test_without_depth_same_colour_alpha_and_gradients(backend):
+    p = random_scene(40, 3, torch.float64, sh=True)
+    vm, K = cameras(20, 16)
+    outs = []
+    for depth in (True, False):
+        out = rasterize(*[p[k] for k in NAMES], vm, K, 20, 16, backend=backend, depth=depth)
+        loss = (out["rgb"] * torch.linspace(0.2, 1.0, 3, dtype=torch.float64)).sum() + 0.7 * out["alpha"].sum()
+        outs.append((out, torch.autograd.grad(loss, [p[k] for k in NAMES])))
+    (a, ga), (b, gb) = outs
+    assert b["depth"] is None and a["depth"].shape == a["alpha"].shape
+    for k in ("rgb", "alpha"):
+        assert torch.equal(a[k], b[k]), k
+    for x, y in zip(ga, gb):
+        assert torch.equal(x, y)
