@@ -23,6 +23,7 @@ pixels are returned bit-exact; only missing pixels change.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from holoflow.recon.config import InpSetParams
 
@@ -77,21 +78,34 @@ DIRECTIONS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -
 def first_observed(valid: np.ndarray, step: tuple[int, int], max_dist: int) -> tuple[np.ndarray, np.ndarray]:
     """For every pixel, the nearest observed pixel along ``step`` (dy, dx) within ``max_dist`` steps.
 
-    valid [H, W] bool (True = observed). Returns (row, col) index arrays [H, W] of that pixel and the
-    step count [H, W] (0 for observed pixels themselves, -1 where none lies within reach)."""
+    valid [H, W] bool (True = observed). Returns (row, col) index arrays [H, W] of that pixel (the
+    pixel itself where none lies within reach) and the step count [H, W] (0 for observed pixels
+    themselves, -1 where none lies within reach)."""
+    valid = np.ascontiguousarray(valid, dtype=np.bool_)
     h, w = valid.shape
-    yy, xx = np.mgrid[0:h, 0:w]
-    dist = np.where(valid, 0, -1)                                     # [H, W]
-    for k in range(1, max_dist + 1):
-        y, x = yy + k * step[0], xx + k * step[1]
-        inside = (y >= 0) & (y < h) & (x >= 0) & (x < w)
-        hit = np.zeros_like(valid)
-        hit[inside] = valid[y[inside], x[inside]]
-        dist = np.where((dist < 0) & hit, k, dist)
-        if (dist >= 0).all():
-            break
-    k = np.maximum(dist, 0)
-    return (yy + k * step[0], xx + k * step[1]), dist
+    rows, cols = np.empty((h, w), np.int64), np.empty((h, w), np.int64)
+    dist = np.empty((h, w), np.int64)
+    _walk(valid, int(step[0]), int(step[1]), int(max_dist), rows, cols, dist)
+    return (rows, cols), dist
+
+
+@njit(cache=True)
+def _walk(valid, dy, dx, max_dist, rows, cols, dist):
+    """Per pixel, walk ``step`` until an observed pixel, the border or ``max_dist`` steps (first_observed)."""
+    h, w = valid.shape
+    for y in range(h):
+        for x in range(w):
+            found = -1
+            for k in range(max_dist + 1):
+                yy, xx = y + k * dy, x + k * dx
+                if yy < 0 or yy >= h or xx < 0 or xx >= w:
+                    break
+                if valid[yy, xx]:
+                    found = k
+                    break
+            dist[y, x] = found
+            k = max(found, 0)
+            rows[y, x], cols[y, x] = y + k * dy, x + k * dx
 
 
 def background_fill(image: np.ndarray, missing: np.ndarray, depth: np.ndarray, max_dist: int = 32,
