@@ -442,15 +442,20 @@ def _interp_wrap(values: np.ndarray, x: np.ndarray) -> np.ndarray:
 def classify_scene(lab: np.ndarray, lat: np.ndarray) -> tuple[str, str]:
     """indoor | outdoor from the zenith cap (lat > 45 deg) of a Lab panorama, and why (one line).
 
-    Sky-like pixel: bluish (Lab b* < -5) and not darker than the image's median lightness, or clearly
-    blue (b* < -20, L > 20) at any lightness. A cap where most pixels are sky-like is outdoors.
+    Sky-like pixel: bluish and not darker than the image's median lightness, or clearly blue
+    (b* < -20, L > 20) at any lightness. Bluish means b* < -5, relaxed up to b* < -2 when the ground
+    (the median b* below the horizon) is warmer, so that the zenith is still 5 units bluer than the
+    ground: a hazy or overcast sky is only slightly blue but bluer than the surfaces it lights, while
+    a ceiling is lit like the floor. A cap where most pixels are sky-like is outdoors.
     """
     cap = lab[lat > np.radians(45)]
     Lc, bc = cap[..., 0], cap[..., 2]
-    # blue and not darker than the typical pixel, or a saturated blue (b* < -20: a clear zenith is
-    # often darker than sunlit ground); overcast skies are not recognised (docs)
-    sky = ((Lc >= np.median(lab[..., 0])) & (bc < -5)) | ((bc < -20) & (Lc > 20))
+    ground = lab[lat < 0]
+    ground_b = float(np.median(ground[..., 2])) if ground.size else 0.0
+    bluish = float(np.clip(ground_b - 5.0, -5.0, -2.0))  # b* threshold
+    # a clear zenith is often darker than sunlit ground: a saturated blue counts at any lightness
+    sky = ((Lc >= np.median(lab[..., 0])) & (bc < bluish)) | ((bc < -20) & (Lc > 20))
     frac = float(sky.mean()) if sky.size else 0.0
     if frac > 0.5:
-        return "outdoor", f"{frac:.0%} of the zenith cap is bright blue sky (> 50%)"
-    return "indoor", f"{frac:.0%} of the zenith cap looks like sky (needs > 50%)"
+        return "outdoor", f"{frac:.0%} of the zenith cap is bright bluish sky (> 50%; b* < {bluish:.1f})"
+    return "indoor", f"{frac:.0%} of the zenith cap looks like sky (needs > 50%; b* < {bluish:.1f})"

@@ -106,6 +106,20 @@ def test_deep_blue_sky_over_bright_ground_is_outdoors():
     assert classify_scene(_lab_of(img), _lat(H))[0] == "indoor"
 
 
+def test_hazy_sky_bluer_than_the_ground_is_outdoors():
+    """An overcast / hazy zenith is only slightly blue (b* about -3) but bluer than the road it lights:
+    outdoors; the same cool white over a floor of the same tint is a ceiling: indoors."""
+    H, W = 64, 128
+    img = np.zeros((H, W, 3), np.float32)
+    img[: H // 2] = (0.52, 0.55, 0.59)   # hazy sky (b* -3.6), brighter than the ground
+    img[H // 2:] = (0.20, 0.19, 0.17)    # warm grey asphalt
+    lab = _lab_of(img)
+    assert -5 < np.median(lab[: H // 4, :, 2]) < -2  # only slightly bluish: the fixed b* < -5 test misses it
+    assert classify_scene(lab, _lat(H))[0] == "outdoor"
+    img[H // 2:] = (0.22, 0.23, 0.245)  # a floor almost as cool as the ceiling (b* -2.5)
+    assert classify_scene(_lab_of(img), _lat(H))[0] == "indoor"
+
+
 def _lab_of(img):
     from holoflow.depth.layout import _lab
     from holoflow.imageops.color import linear_to_uint8
