@@ -1,6 +1,7 @@
 """The warm template: a process that imports heavy modules once and forks one child per step.
 
-Started by holoflow.executors.warm as ``python -m holoflow.executors.template CONTROL_FD MODULE...``
+Started by holoflow.executors.warm as ``python -m holoflow.executors.template CONTROL_FD MODULE...
+[--idle MODULE...]``
 with the thread variables of one ``resources.cpus`` value already in its environment (so every
 library reads the same thread counts at import as a cold step would). It imports the modules named,
 starts nothing parallel (no torch op, no numba kernel; OpenBLAS stops its idle pool before each fork
@@ -30,22 +31,28 @@ import sys
 PR_SET_NAME, PR_SET_PDEATHSIG = 15, 1
 
 
-def serve(control_fd: int, modules: list[str]) -> None:
-    """Import ``modules`` (those installed), then fork children for requests until the runner leaves."""
+def serve(control_fd: int, modules: list[str], idle: list[str] = ()) -> None:
+    """Import ``modules`` (those installed), then fork children for requests until the runner leaves.
+    ``idle`` modules are imported one at a time until the first request arrives: a template started
+    ahead of its steps (``LocalExecutor.expect``) loads them off the run's critical path, one whose
+    step is already waiting does not make it wait longer (its steps import them when they need them)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)        # Ctrl-C reaches the runner, which stops us
     for name in modules:
-        try:
-            importlib.import_module(name)
-        except ImportError:
-            pass                    # not installed here: a step that needs it fails on its own
+        _import(name)
+    idle = list(idle)
     libc = ctypes.CDLL(None, use_errno=True)
     control = socket.socket(fileno=control_fd)
     sel = selectors.DefaultSelector()
     sel.register(control, selectors.EVENT_READ, "control")
     steps: dict[int, tuple[socket.socket, int]] = {}     # pid -> (channel, pidfd)
     while True:
-        for key, _ in sel.select():
+        events = sel.select(0 if idle else None)
+        if not events and idle:
+            _import(idle.pop(0))
+            continue
+        for key, _ in events:
             if key.data == "control":
+                idle.clear()
                 msg, fds, _, _ = socket.recv_fds(control, 1 << 20, 2)
                 if not msg:
                     for pid in steps:
@@ -80,6 +87,13 @@ def serve(control_fd: int, modules: list[str]) -> None:
                 _send(chan, {"status": status, "utime": usage.ru_utime, "stime": usage.ru_stime,
                              "maxrss": usage.ru_maxrss})
                 chan.close()
+
+
+def _import(name: str) -> None:
+    try:
+        importlib.import_module(name)
+    except ImportError:
+        pass                        # not installed here: a step that needs it fails on its own
 
 
 def _child(req: dict, out: int, inherited: list[int], libc) -> None:
@@ -163,4 +177,6 @@ def _send(chan: socket.socket, payload: dict) -> None:
 
 
 if __name__ == "__main__":
-    serve(int(sys.argv[1]), sys.argv[2:])
+    args = sys.argv[2:]
+    cut = args.index("--idle") if "--idle" in args else len(args)
+    serve(int(sys.argv[1]), args[:cut], args[cut + 1:])

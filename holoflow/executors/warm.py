@@ -23,9 +23,10 @@ from .step import popen
 
 #: third-party modules worth importing once per run (seconds each on a 2-core machine, for torch)
 HEAVY = frozenset({"torch", "numpy", "scipy", "kornia", "numba", "cv2", "OpenImageIO", "OpenEXR", "plyfile"})
-#: what a heavy module imports on first use rather than at import: torch's optimisers load
-#: torch._dynamo in their constructor (0.7 s on a 2-core machine, paid by every training step)
-ON_FIRST_USE = {"torch": ("torch._dynamo",)}
+#: what a module loads on first use rather than at import: torch's optimisers import torch._dynamo in
+#: their constructor (0.7 s on a 2-core machine, paid by every training step). A template imports
+#: these while it waits for its first step (template.serve's ``idle``)
+ON_FIRST_USE = {"torch.optim": ("torch._dynamo",)}
 
 
 def supported() -> bool:
@@ -34,9 +35,13 @@ def supported() -> bool:
 
 
 def preload(modules: list[str]) -> list[str]:
-    """The :data:`HEAVY` ones among a step's external imports, with what they load on first use."""
-    heavy = {m for m in modules if m.partition(".")[0] in HEAVY}
-    return sorted(heavy.union(*(ON_FIRST_USE.get(m.partition(".")[0], ()) for m in heavy)))
+    """The :data:`HEAVY` ones among a step's external imports."""
+    return sorted(m for m in modules if m.partition(".")[0] in HEAVY)
+
+
+def first_use(modules: list[str]) -> list[str]:
+    """What the step's external imports load on first use (:data:`ON_FIRST_USE`)."""
+    return sorted({x for m in modules for x in ON_FIRST_USE.get(m, ())})
 
 
 class WarmStep:
@@ -66,11 +71,12 @@ class WarmStep:
 
 
 class _Template:
-    def __init__(self, threads_env: dict[str, str], modules: list[str]):
+    def __init__(self, threads_env: dict[str, str], modules: list[str], idle: list[str]):
         self.control, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         env = dict(os.environ, PYTHONUNBUFFERED="1", **threads_env)
+        argv = [str(theirs.fileno()), *modules, *(["--idle", *idle] if idle else [])]
         with theirs:
-            self.proc = popen([sys.executable, "-m", "holoflow.executors.template", str(theirs.fileno()), *modules],
+            self.proc = popen([sys.executable, "-m", "holoflow.executors.template", *argv],
                               pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                               cwd=HOLOFLOW_ROOT, env=env)
 
@@ -118,7 +124,7 @@ class Launcher:
         n = threads_env.get("OMP_NUM_THREADS", "1")
         t = self._templates.get(n)
         if t is None or not t.alive():
-            self._templates[n] = _Template(threads_env, preload(modules))
+            self._templates[n] = _Template(threads_env, preload(modules), first_use(modules))
 
     def start(self, program: str, job: str, cwd: str, env: dict[str, str]) -> WarmStep:
         """Fork ``python PROGRAM JOB`` from the template of ``env``'s thread count (ensured before)."""

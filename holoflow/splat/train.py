@@ -8,6 +8,7 @@ import time
 from dataclasses import asdict, dataclass
 
 import torch
+import torch.optim  # named for the warm templates: its optimisers load torch._dynamo on first use (executors/warm.py)
 
 from holoflow.splat.model import GaussianModel
 from holoflow.splat.rasterize import render

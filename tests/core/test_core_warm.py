@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from holoflow.executors import step_env
-from holoflow.executors.warm import Launcher, preload, supported
+from holoflow.executors import warm
+from holoflow.executors.warm import Launcher, first_use, preload, supported
 
 pytestmark = pytest.mark.skipif(not supported(), reason="warm starts need Linux pidfds")
 
@@ -118,11 +119,21 @@ def _alive(pid):
 
 
 def test_preload_keeps_heavy_third_party_modules_only():
-    assert preload(["numpy", "json", "diffusers", "holoflow.stage"]) == ["numpy"]
+    assert preload(["torch.nn", "numpy", "json", "diffusers", "holoflow.stage"]) == ["numpy", "torch.nn"]
+    assert first_use(["torch.optim", "numpy"]) == ["torch._dynamo"] and first_use(["torch"]) == []
 
 
-def test_preload_adds_what_torch_loads_on_first_use():
-    assert preload(["torch.nn", "numpy"]) == ["numpy", "torch._dynamo", "torch.nn"]
+def test_template_imports_first_use_modules_while_it_waits(tmp_path, launcher, monkeypatch):
+    (tmp_path / "slow_first_use.py").write_text(f"open({str(tmp_path / 'imported')!r}, 'w').close()\n")
+    (tmp_path / "probe.py").write_text("import sys; print('slow_first_use' in sys.modules)\n")
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    monkeypatch.setitem(warm.ON_FIRST_USE, "json", ("slow_first_use",))
+    launcher.ensure(step_env({"cpus": 1}), ["json"])
+    deadline = time.monotonic() + 30
+    while not (tmp_path / "imported").exists():            # imported before any step asked for it
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert _run(launcher, tmp_path / "probe.py")[2].strip() == "True"
 
 
 def test_step_env_sets_threads_and_a_passive_wait_policy(monkeypatch):
