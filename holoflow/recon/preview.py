@@ -58,7 +58,7 @@ def render_at(model, viewmats: torch.Tensor, K: torch.Tensor, size: int, backend
     for s in range(0, len(viewmats), 8):
         vm = viewmats[s:s + 8].to(dev)
         out.append(render(model, vm, Ks[None].expand(len(vm), 3, 3), size, size,
-                          backend=backend)["rgb"].clamp(0, 1).cpu())
+                          backend=backend, depth=False)["rgb"].clamp(0, 1).cpu())
     return torch.cat(out)
 
 

@@ -156,10 +156,11 @@ def render_views(model, views: list[dict], backend: str, chunk: int = 8, with_de
         part = views[s:s + chunk]
         vm = torch.stack([v["viewmat"] for v in part]).to(dev)
         K = torch.stack([v["K"] for v in part]).to(dev)
-        out = render(model, vm, K, w, h, backend=backend)
+        out = render(model, vm, K, w, h, backend=backend, depth=with_depth)
         rgbs.append(out["rgb"].clamp(0, 1).cpu())
         alphas.append(out["alpha"].cpu())
-        depths.append((out["depth"] / out["alpha"].clamp_min(1e-6)).where(out["alpha"] > 0, 0.0).cpu())
+        if with_depth:
+            depths.append((out["depth"] / out["alpha"].clamp_min(1e-6)).where(out["alpha"] > 0, 0.0).cpu())
     if with_depth:
         return torch.cat(rgbs), torch.cat(alphas), torch.cat(depths)
     return torch.cat(rgbs), torch.cat(alphas)
