@@ -136,9 +136,14 @@ def test_template_imports_first_use_modules_while_it_waits(tmp_path, launcher, m
     assert _run(launcher, tmp_path / "probe.py")[2].strip() == "True"
 
 
-def test_step_env_sets_threads_and_a_passive_wait_policy(monkeypatch):
+def test_step_env_sets_threads_and_a_bounded_spin(monkeypatch):
     monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    monkeypatch.delenv("GOMP_SPINCOUNT", raising=False)
     env = step_env({"cpus": 1})
-    assert env["OMP_NUM_THREADS"] == env["NUMBA_NUM_THREADS"] == "1" and env["OMP_WAIT_POLICY"] == "PASSIVE"
-    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
-    assert step_env({"cpus": 1})["OMP_WAIT_POLICY"] == "ACTIVE"
+    assert env["OMP_NUM_THREADS"] == env["NUMBA_NUM_THREADS"] == "1" and env["GOMP_SPINCOUNT"] == "30000"
+    assert "OMP_WAIT_POLICY" not in env
+    monkeypatch.setenv("GOMP_SPINCOUNT", "1000")
+    assert step_env({"cpus": 1})["GOMP_SPINCOUNT"] == "1000"
+    monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")                 # the user's policy wins
+    env = step_env({"cpus": 1})
+    assert env["OMP_WAIT_POLICY"] == "PASSIVE" and "GOMP_SPINCOUNT" not in env
