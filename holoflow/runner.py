@@ -328,6 +328,7 @@ class _Scheduler:
     def __init__(self, states: list[_SceneRun], make_executor, display, retries: int | None):
         self.states, self.make_executor, self.display, self._retries = states, make_executor, display, retries
         self.executor_made = None                 # made on the first step to run (a cached run needs none)
+        self.expected = False                     # the executor was told the steps to come (expect)
         self.total = sum(len(st.order) for st in states)
         self.done = 0
         self.inflight: dict[str, _Job] = {}       # key -> job (queued or running)
@@ -429,7 +430,8 @@ class _Scheduler:
                         modules=sorted(ctx.hasher.external(pipe.program(name))))
 
     def submit(self, job: _Job) -> None:
-        if self.executor_made is None and self.executor.kind == "local":
+        if not self.expected and self.executor.kind == "local":
+            self.expected = True
             self.executor.expect([(st.ctx.resolved[n].resources.as_dict(), sorted(st.ctx.hasher.external(
                 st.ctx.pipe.program(n)))) for st in self.states for n in st.pending if n not in st.ctx.uses])
         for st, name in job.waiters:              # "ran in" counts from the start, not the queue

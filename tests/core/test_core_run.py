@@ -155,3 +155,14 @@ def test_log_command(project, capsys):
     project.run_json("p", capsys=capsys)
     rc, out, _ = project.cli("log", "gen", capsys=capsys)
     assert rc == 0 and '@progress {"done": 2, "total": 2, "what": "lines"}' in out
+
+
+def test_warm_templates_are_started_for_every_step_at_the_first_submit(project, capsys, monkeypatch):
+    # templates start ahead of their steps so their imports overlap the steps before them
+    from holoflow.executors.local import LocalExecutor
+
+    calls = []
+    real = LocalExecutor.expect
+    monkeypatch.setattr(LocalExecutor, "expect", lambda self, needs: (calls.append(needs), real(self, needs))[1])
+    project.run_json("p", capsys=capsys)
+    assert len(calls) == 1 and len(calls[0]) == 3               # gen, upper, join: all known at the start
