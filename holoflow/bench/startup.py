@@ -132,8 +132,8 @@ def report(args, steps, e2e) -> str:
     lines = ["# Start-up: cold against warm steps", "",
              f"`holoflow bench startup --rounds {args.rounds}`"
              + (f" `--baseline {args.baseline}`" if args.baseline else "") + f", {time.strftime('%Y-%m-%d')}, "
-             f"on {machine()}; load average after: {load()}. The machine was shared with other work while "
-             f"this ran: all timings are wall clock, medians of interleaved rounds, and noisy.", "",
+             f"on {machine()}; load average after: {load()} (1 is the bench itself; more means other work "
+             f"shared the machine). All timings are wall clock, medians of interleaved rounds.", "",
              "## Per step: launch + imports, until the step could start working", "",
              "Probe: a program importing what the stage's import closure imports; cold = exec'd "
              "(`python PROBE`), warm = forked from the run's template (which preloaded the heavy "
