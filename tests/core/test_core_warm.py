@@ -147,3 +147,5 @@ def test_step_env_sets_threads_and_a_bounded_spin(monkeypatch):
     monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")                 # the user's policy wins
     env = step_env({"cpus": 1})
     assert env["OMP_WAIT_POLICY"] == "PASSIVE" and "GOMP_SPINCOUNT" not in env
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    assert step_env({"cpus": 1})["OMP_WAIT_POLICY"] == "ACTIVE"
