@@ -337,11 +337,12 @@ class _Scheduler:
         self.forced_done: dict[str, dict] = {}    # forced keys recomputed in this batch -> record
 
     def warn_dropped_uses(self) -> None:
+        from .uses import dropped_uses
+
         for st in self.states:
-            latest = st.ctx.store.run_info(st.ctx.store.latest_run_id()) or {}
-            for name, s in latest.get("stages", {}).items():
-                if s.get("how") == "used" and name in st.needed and name not in st.ctx.uses:
-                    self.display.line(f"note: the latest run took {name} from {s.get('source')} (--use); "
+            for name, source in dropped_uses(st.ctx).items():
+                if name in st.needed:
+                    self.display.line(f"note: the latest run took {name} from {source} (--use); "
                                       f"this run does not: pass --use {name}=... again to keep it")
 
     @property

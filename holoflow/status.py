@@ -3,11 +3,12 @@
 """
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .cachekey import cache_key, reasons
-from .uses import IMAGE_EXTS, import_cache
+from .uses import IMAGE_EXTS, dropped_uses, import_cache
 
 if TYPE_CHECKING:
     from .runner import Context
@@ -77,6 +78,10 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
         why = explain(ctx, name, comp)
         out[name] = {"state": "missing" if why == ["never run"] else "stale", "reasons": why,
                      "key": key}
+    for name, source in dropped_uses(ctx).items():  # the latest run's own file is not in this view
+        if name in out and out[name]["state"] != "fresh":
+            out[name]["reasons"].append(f"the latest run used {source} (--use): "
+                                        f"holoflow status --use {shlex.quote(f'{name}={source}')} shows that run")
     ctx.hasher.save()
     return out
 

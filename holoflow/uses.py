@@ -31,6 +31,13 @@ def parse_uses(pipe: Pipeline, uses: list[str]) -> dict[str, Path]:
     return out
 
 
+def dropped_uses(ctx: Context) -> dict[str, str]:
+    """Stages the latest run took from a user's file (``--use``) that ``ctx`` does not: stage -> source."""
+    latest = ctx.store.run_info(ctx.store.latest_run_id()) or {}
+    return {name: str(s.get("source")) for name, s in latest.get("stages", {}).items()
+            if s.get("how") == "used" and name not in ctx.uses}
+
+
 def import_use(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     """Validate the user's file(s) for ``stage`` and hash them into the store; returns the output map."""
     s = ctx.pipe.stages[stage]

@@ -42,6 +42,20 @@ def test_use_rejects_non_exr_and_wrong_suffix(project, capsys):
     assert rc == 2 and "main output is pano.exr" in err
 
 
+def test_status_after_a_use_run_says_which_file_that_run_took(project, capsys, tmp_path):
+    mine = tmp_path / "my text.txt"
+    mine.write_text("my own text\n")
+    project.run_json("--use", f"gen={mine}", capsys=capsys)
+    rc, out, _ = project.cli("status", "--json", capsys=capsys)
+    gen = json.loads(out)["stages"]["gen"]
+    assert rc == 0 and gen["state"] == "missing"
+    assert f"the latest run used {mine} (--use): holoflow status --use 'gen={mine}' shows that run" in gen["reasons"]
+    rc, out, _ = project.cli("status", "--json", "--use", f"gen={mine}", capsys=capsys)
+    st = json.loads(out)["stages"]
+    assert {n: s["state"] for n, s in st.items()} == {"gen": "fresh", "upper": "fresh", "join": "fresh"}
+    assert not any("latest run used" in r for s in st.values() for r in s["reasons"])
+
+
 def test_use_text_file_and_folder_downstream_runs(project, capsys, tmp_path):
     project.run_json("p", capsys=capsys)
     mine = tmp_path / "whatever.txt"
