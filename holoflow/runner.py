@@ -21,7 +21,7 @@ from .cachekey import CodeHasher, cache_key, components, tree_digest
 from .executors import StepTask
 from .pipeline import Pipeline, PipelineError, Resolved, check_files, profile_device, resolve
 from .status import dry_run, explain
-from .uses import import_use, parse_uses
+from .uses import dropped_uses, import_use, parse_uses
 from .store import Store
 
 
@@ -337,8 +337,6 @@ class _Scheduler:
         self.forced_done: dict[str, dict] = {}    # forced keys recomputed in this batch -> record
 
     def warn_dropped_uses(self) -> None:
-        from .uses import dropped_uses
-
         for st in self.states:
             for name, source in dropped_uses(st.ctx).items():
                 if name in st.needed:
