@@ -10,6 +10,12 @@ output (what point_cloud reads) is scored against the truth: ``metric`` items as
 ``relative`` items after a median scale fit, ``ordinal`` items after a median scale fit too (order
 and shape only: read with care). Procedural scenes (``--prompts``) are run the same way, scored on
 their own truth (default engine there: ``auto`` -> simulated; plus ``layout`` forced).
+
+The layout estimate is sensitive to resampling (docs/depth-layout.md, round 5), so each item's figure
+carries noise: ``--turns N`` (default 4) also runs the layout engine straight on the panorama it
+receives in that run (the detail output at the depth's width), turned about the vertical axis by
+i x 45 / N degrees (i < N; a multiple of 90 degrees is an exact symmetry, 45 the view spacing), and
+reports the spread of its AbsRel over the turns: a change smaller than that spread is noise.
 Writes docs/bench-realdepth.md and docs/images/realdepth-*.png. Skips with a message when the data
 folder is absent.
 """
@@ -36,22 +42,36 @@ ENGINES = {"prior": ["--set", "tangent_depth.engine=prior", "--set", "metric_ali
 
 def run_pipeline(store: Path, prompt: str, extra: list[str]) -> tuple[np.ndarray, dict, float]:
     """``holoflow run PROMPT EXTRA --until metric_align`` in ``store``; (depth [H, W], metric_align.json,
-    seconds)."""
+    seconds the two depth steps took in that run: the sum of their records' ``wall_s``, 0 if cached)."""
     from holoflow.io.exr import read_exr
+    from holoflow.store import Store
 
     env = {**os.environ, "HOLOFLOW_STORE": str(store)}
     root = Path(__file__).resolve().parents[2]
-    t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "holoflow", "run", prompt, *extra, "--until", "metric_align"],
                           cwd=root, env=env, capture_output=True, text=True)
-    seconds = time.perf_counter() - t0
     if proc.returncode != 0:
         raise RuntimeError(f"holoflow run failed: {proc.stderr.strip().splitlines()[-1:]}")
-    out = store / "runs" / "latest" / "metric_align"
-    if not out.exists():
-        out = sorted((store / "runs").glob("*/metric_align"))[-1]
+    st = Store(store)
+    run = st.run_ids()[-1]
+    stages = st.run_info(run)["stages"]
+    seconds = sum(st.record(stages[n]["key"])["provenance"]["wall_s"] for n in ("tangent_depth", "metric_align")
+                  if stages[n]["how"] == "ran")
+    out = st.run_dir(run) / "metric_align"
     ch, _ = read_exr(out / "depth.exr")
     return ch["Z"].astype(np.float64), json.loads((out / "metric_align.json").read_text()), seconds
+
+
+def detail_input(store: Path, width: int) -> np.ndarray:
+    """The latest run's detail panorama (linear RGB [H, W, 3]) resized to ``width``: what the depth
+    engines receive."""
+    from holoflow.depth.io import read_pano
+    from holoflow.depth.panorama import resize_pano
+
+    from holoflow.store import Store
+
+    st = Store(store)
+    return resize_pano(read_pano(st.run_dir(st.run_ids()[-1]) / "detail" / "pano.exr"), width)
 
 
 def read_truth(path: Path) -> tuple[np.ndarray, str]:
@@ -78,12 +98,29 @@ def score(depth: np.ndarray, truth: np.ndarray, scale: str) -> dict:
     return {**m, "fit_scale": fit}
 
 
+def turned_abs_rel(pano: np.ndarray, truth: np.ndarray, scale: str, turns: int) -> list[float]:
+    """AbsRel of the layout engine (default config) on the linear RGB panorama [H, W, 3] turned about
+    the vertical axis by i x 45 / ``turns`` degrees, i < ``turns`` (whole columns), each estimate turned
+    back and scored against ``truth`` like the pipeline's output (``score``)."""
+    from holoflow.depth.layout import estimate_layout_depth
+
+    W = pano.shape[1]
+    out = []
+    for i in range(turns):
+        cols = int(round(i * W / (8 * turns)))  # 45 degrees = W / 8 columns
+        depth = estimate_layout_depth(np.roll(pano, cols, axis=1)).depth
+        out.append(score(np.roll(depth.astype(np.float64), -cols, axis=1), truth, scale)["abs_rel"])
+    return out
+
+
 def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="holoflow bench realdepth", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="holoflow bench realdepth", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--data", default=str(DATA), help="folder of NAME_rgb.png + NAME_depth.exr")
     ap.add_argument("--out", default="docs", help="folder for bench-realdepth.md (images/ beneath it)")
     ap.add_argument("--prompts", default="|".join(PROMPTS), help="procedural scenes, '|'-separated ('' = none)")
     ap.add_argument("--only", default="", help="comma-separated item names (default: all)")
+    ap.add_argument("--turns", type=int, default=4,
+                    help="layout runs per item, turned by i x 45 / N degrees, for the AbsRel spread (0 = none)")
     args = ap.parse_args(argv)
     data = Path(args.data)
     if not data.is_dir():
@@ -112,6 +149,11 @@ def main(argv: list[str]) -> int:
                 preds[eng] = depth
                 print(f"{name} {eng}: {rep['engine']['engine']} AbsRel {row[eng]['abs_rel']:.3f} "
                       f"delta1 {row[eng]['delta1']:.3f} ({sec:.1f} s)", flush=True)
+            if args.turns > 0 and row["default"]["engine"] == "layout":
+                row["turns"] = turned_abs_rel(detail_input(Path(tmp) / name, preds["default"].shape[1]),
+                                              truth, scale, args.turns)
+                print(f"{name} layout over {args.turns} turns: AbsRel "
+                      + " ".join(f"{a:.3f}" for a in row["turns"]), flush=True)
             rows.append(row)
             pics.append((name, data / f"{name}_rgb.png", truth, preds))
         proc_rows = []
@@ -133,27 +175,41 @@ def main(argv: list[str]) -> int:
 
 
 def write_pictures(folder: Path, pics) -> None:
-    """One PNG per item: RGB | truth | prior | default engine (log depth 0.5..20 m, bright = near)."""
+    """One PNG per item: RGB | truth / default engine | its error. Depth as log depth 0.5..20 m
+    (bright = near, black = no value or sky); error as log(default / truth), red = too far, blue =
+    too near, full colour at a factor of 3."""
     import cv2
 
+    from holoflow.depth.panorama import resize_radial
+
+    H, W = 256, 512
     for name, rgb_path, truth, preds in pics:
-        rgb = cv2.imread(str(rgb_path))
-        H, W = 256, 512
-        rgb = cv2.resize(rgb, (W, H), interpolation=cv2.INTER_AREA)
+        rgb = cv2.resize(cv2.imread(str(rgb_path)), (W, H), interpolation=cv2.INTER_AREA)
+        t = resize_radial(np.where(np.isnan(truth), 0.0, truth), H, W)
+        d = resize_radial(np.where(np.isnan(preds["default"]), 0.0, preds["default"]), H, W)
 
-        def shade(d):
-            from holoflow.depth.panorama import resize_radial
-
-            d = resize_radial(np.where(np.isnan(d), 0.0, d), H, W)
-            v = 1.0 - np.log(np.clip(d, 0.5, 20.0) / 0.5) / np.log(40.0)
+        def shade(z):
+            v = 1.0 - np.log(np.clip(z, 0.5, 20.0) / 0.5) / np.log(40.0)
             img = cv2.applyColorMap((np.clip(v, 0, 1) * 255).astype(np.uint8), cv2.COLORMAP_VIRIDIS)
-            img[~(np.isfinite(d) & (d > 0))] = 0
+            img[~(np.isfinite(z) & (z > 0))] = 0
             return img
 
-        tiles = [rgb, shade(truth), shade(preds["prior"]), shade(preds["default"])]
-        for img, label in zip(tiles, ("image", "truth", "prior", "default (layout)")):
+        ok = np.isfinite(t) & (t > 0) & np.isfinite(d) & (d > 0)
+        e = np.where(ok, np.log(np.where(ok, d, 1.0) / np.where(ok, t, 1.0)) / np.log(3.0), 0.0)  # [H, W]
+        err = np.zeros((H, W, 3), np.uint8)  # BGR
+        err[..., 2] = (np.clip(e, 0, 1) * 255).astype(np.uint8)
+        err[..., 0] = (np.clip(-e, 0, 1) * 255).astype(np.uint8)
+        tiles = [rgb, shade(t), shade(d), err]
+        for img, label in zip(tiles, ("image", "truth", "default", "default / truth (red far, blue near)")):
             cv2.putText(img, label, (6, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2)
         cv2.imwrite(str(folder / f"realdepth-{name}.png"), np.vstack([np.hstack(tiles[:2]), np.hstack(tiles[2:])]))
+
+
+def spread(abs_rels: list[float] | None) -> str:
+    """'mean (min-max)' of per-turn AbsRel values, '-' when there are none."""
+    if not abs_rels:
+        return "-"
+    return f"{np.mean(abs_rels):.3f} ({min(abs_rels):.3f}-{max(abs_rels):.3f})"
 
 
 def write_table(path: Path, rows, proc_rows, seconds: float, data: Path) -> None:
@@ -172,21 +228,30 @@ def write_table(path: Path, rows, proc_rows, seconds: float, data: Path) -> None
              "the constant room prior (`--set tangent_depth.engine=prior --set metric_align.engine=prior`). "
              "`metric` items are scored as they are; `relative` and `ordinal` items after a median scale fit "
              "(ordinal: coarse, read with care).", "",
-             "| item | truth | scene | prior AbsRel | prior RMSE | prior delta1 | default AbsRel | default RMSE | default delta1 |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "`s` = seconds the two depth steps (tangent_depth + metric_align) took: what the accuracy "
+             "costs. `turns` = AbsRel of the layout engine straight on the panorama it "
+             "received, turned about the vertical axis (module docstring): mean (min-max); a difference "
+             "smaller than this spread is noise.", "",
+             "| item | truth | scene | prior AbsRel | prior RMSE | prior delta1 | prior s | default AbsRel | "
+             "default RMSE | default delta1 | default s | turns AbsRel |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['name']} | {r['scale']} | {r.get('scene') or '-'} | {f(r['prior'], 'abs_rel')} | "
-                     f"{f(r['prior'], 'rmse')} | {f(r['prior'], 'delta1')} | {f(r['default'], 'abs_rel')} | "
-                     f"{f(r['default'], 'rmse')} | {f(r['default'], 'delta1')} |")
+                     f"{f(r['prior'], 'rmse')} | {f(r['prior'], 'delta1')} | {r['prior']['seconds']:.1f} | "
+                     f"{f(r['default'], 'abs_rel')} | {f(r['default'], 'rmse')} | {f(r['default'], 'delta1')} | "
+                     f"{r['default']['seconds']:.1f} | {spread(r.get('turns'))} |")
     indoor = [r for r in rows if r["scale"] == "metric" and r.get("scene", "indoor") == "indoor"
               and not r["name"].startswith("gsv")]
     if indoor:
         med = {e: {k: float(np.median([r[e][k] for r in indoor])) for k in ("abs_rel", "rmse", "delta1")}
                for e in ("prior", "default")}
+        turned = [r["turns"] for r in indoor if r.get("turns")]
+        med_turns = f"**{np.median([np.mean(t) for t in turned]):.3f}** (median of means)" \
+            if len(turned) == len(indoor) else ""
         lines.append(f"| **median, {len(indoor)} indoor metric items** | | | **{f(med['prior'], 'abs_rel')}** | "
-                     f"**{f(med['prior'], 'rmse')}** | **{f(med['prior'], 'delta1')}** | "
+                     f"**{f(med['prior'], 'rmse')}** | **{f(med['prior'], 'delta1')}** | | "
                      f"**{f(med['default'], 'abs_rel')}** | **{f(med['default'], 'rmse')}** | "
-                     f"**{f(med['default'], 'delta1')}** |")
+                     f"**{f(med['default'], 'delta1')}** | | {med_turns} |")
         goal = med["default"]["abs_rel"] <= 0.20 and med["default"]["delta1"] >= 0.70
         lines += ["", f"Goal (issue 20) on the indoor metric items: AbsRel <= 0.20 and delta1 >= 0.70 -> "
                   f"**{'met' if goal else 'NOT met'}** (median AbsRel {f(med['default'], 'abs_rel')}, "
@@ -199,6 +264,6 @@ def write_table(path: Path, rows, proc_rows, seconds: float, data: Path) -> None
             lines.append(f"| {r['name']} | {f(r['default'], 'abs_rel')} / {f(r['default'], 'delta1')} | "
                          f"{f(r['prior'], 'abs_rel')} / {f(r['prior'], 'delta1')} | "
                          f"{f(r['layout'], 'abs_rel')} / {f(r['layout'], 'delta1')} |")
-    lines += ["", "Pictures (image | truth / prior | default; log depth 0.5-20 m, bright = near, black = no "
-              "value or sky): " + ", ".join(f"[{r['name']}](images/realdepth-{r['name']}.png)" for r in rows), ""]
+    lines += ["", "Pictures (image | truth / default | default / truth; depth as log depth 0.5-20 m, bright = "
+              "near, black = no value or sky; error red = too far, blue = too near, full at a factor of 3): " + ", ".join(f"[{r['name']}](images/realdepth-{r['name']}.png)" for r in rows), ""]
     path.write_text("\n".join(lines))
