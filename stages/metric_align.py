@@ -1,6 +1,7 @@
 """metric_align: metric depth (engine) on a seeded random subset of ``faces`` tangent faces, turned
 into radial disparity references; one global scale + offset maps the blended disparity onto them
-(Huber IRLS on relative residuals). Writes depth.exr (Z = radial metres, +inf sky) and
+(Huber IRLS on relative residuals); blended pixels at the sky's border that are mostly sky are made
+sky (docs/depth.md, step 6). Writes depth.exr (Z = radial metres, +inf sky) and
 metric_align.json (scale, offset, residuals, faces used); with a truth depth it records AbsRel,
 RMSE and delta1 of the result (docs/depth.md)."""
 from __future__ import annotations

@@ -5,6 +5,8 @@ blended relative disparity x at the same directions is fitted as y ~ a * x + b b
 reweighted least squares on *relative* residuals (a x + b - y) / y, with Huber weights, so that
 near and far pixels count alike and outliers (edge mixing, a metric network's sky) are down-weighted;
 a last plain least-squares pass on the inliers (|residual| <= 3 huber) removes the Huber bias.
+The depth 1 / (a x + b) is +inf (sky) below 1 / max_depth, and a blended pixel at the sky's border
+that is mostly sky joins it (``sky_mixed_edges``).
 """
 from __future__ import annotations
 
@@ -57,3 +59,25 @@ def disparity_to_depth(disparity: np.ndarray, scale: float, offset: float, max_d
     metric = scale * np.asarray(disparity, dtype=np.float64) + offset
     far = ~(np.isfinite(metric) & (metric >= 1.0 / max_depth))
     return np.where(far, np.inf, 1.0 / np.where(far, 1.0, metric))
+
+
+def sky_mixed_edges(depth: np.ndarray, reach: int = 2) -> np.ndarray:
+    """Radial depth [H, W] (equirect, +inf sky) with its sky-edge mixtures made sky.
+
+    Resampling and blending the faces mixes a sky pixel (disparity 0) with its surface neighbour, so a
+    pixel at a sky border can hold any disparity between 0 and the surface's: a point up to max_depth
+    away, beyond the scene's far shell. A finite pixel within ``reach`` pixels of the sky (a mixture is
+    1-2 pixels wide; columns wrap) whose disparity is under half the largest one within ``reach`` is
+    mostly sky and becomes sky, in one pass (no cascade). Every other pixel is returned unchanged. The
+    largest disparity around may be a nearer object's: a far surface's border pixel beside one over
+    twice as near goes to the sky too (at most ``reach`` pixels of a far silhouette lost, rather than
+    points thrown up to max_depth).
+    """
+    import scipy.ndimage as ndi
+
+    depth = np.asarray(depth, dtype=np.float64)
+    disp = np.where(np.isfinite(depth) & (depth > 0), 1.0 / np.where(depth > 0, depth, 1.0), 0.0)  # [H, W]
+    size, mode = 2 * reach + 1, ("nearest", "wrap")
+    near_sky = ndi.minimum_filter(disp, size=size, mode=mode) == 0.0
+    mixed = (disp > 0) & near_sky & (disp < 0.5 * ndi.maximum_filter(disp, size=size, mode=mode))
+    return np.where(mixed, np.inf, depth)

@@ -14,7 +14,7 @@ from holoflow.depth.align import Alignment, align_faces
 from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 from holoflow.depth.engines import Progress, resolve_engine
 from holoflow.depth.faces import face_rays, find_overlaps
-from holoflow.depth.metric import disparity_to_depth, robust_affine_fit
+from holoflow.depth.metric import disparity_to_depth, robust_affine_fit, sky_mixed_edges
 from holoflow.depth.metrics import depth_metrics
 
 
@@ -187,7 +187,7 @@ def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.nda
     if not fit["scale"] > 0:
         raise ValueError(f"metric alignment gave a non-positive scale ({fit['scale']:.3g}): the relative "
                          "disparity does not grow with the reference disparity (wrong engine output?)")
-    depth = disparity_to_depth(disparity, fit["scale"], fit["offset"], cfg.max_depth)
+    depth = sky_mixed_edges(disparity_to_depth(disparity, fit["scale"], fit["offset"], cfg.max_depth))
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
 
 
@@ -197,7 +197,8 @@ def oracle_metrics(disparity: np.ndarray, truth: np.ndarray, max_depth: float = 
     truth = resize_radial(truth, *disparity.shape)
     ref = np.where(np.isfinite(truth) & (truth > 0), 1.0 / np.where(truth > 0, truth, 1.0), np.nan)
     fit = robust_affine_fit(disparity, ref)
-    return depth_metrics(disparity_to_depth(disparity, fit["scale"], fit["offset"], max_depth), truth)
+    depth = sky_mixed_edges(disparity_to_depth(disparity, fit["scale"], fit["offset"], max_depth))
+    return depth_metrics(depth, truth)
 
 
 def score(depth: np.ndarray, truth: np.ndarray) -> dict:

@@ -13,7 +13,7 @@ from holoflow.depth.align import align_faces
 from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 from holoflow.depth.engines import layout_radial_depth, simulated_relative
 from holoflow.depth.faces import face_rays, find_overlaps
-from holoflow.depth.metric import disparity_to_depth, robust_affine_fit
+from holoflow.depth.metric import disparity_to_depth, robust_affine_fit, sky_mixed_edges
 from holoflow.depth.metrics import depth_metrics
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -82,6 +82,31 @@ def test_robust_fit_ignores_outliers_and_fails_clearly():
 def test_disparity_to_depth_sky_and_nonfinite():
     z = disparity_to_depth(np.array([1.0, 0.0, np.nan, -1.0, 0.5]), 2.0, 0.0, max_depth=100.0)
     assert z[0] == 0.5 and z[4] == 1.0 and np.isposinf(z[1:4]).all()
+
+
+def test_sky_edge_mixtures_become_sky_and_nothing_else_moves():
+    """A building at 20 m under the sky, its border blurred as face blending blurs it: the mixed pixels
+    hold up to 3 km. Mostly-sky mixtures become sky, mostly-building ones stay (but for those within 2
+    pixels of a pole over twice as near, documented); the rest, the far ground and the seam (columns
+    wrap) stay bit for bit."""
+    H, W = 32, 64
+    disp = np.zeros((H, W))
+    disp[10:] = 1 / 20.0                                   # building (rows 10..), sky above
+    disp[20:] = 1 / np.linspace(200.0, 2.0, H - 20)[:, None]  # ground from far (row 20) to near
+    disp[12:, 30:34] = 1 / 8.0                             # a nearer pole below the building's top
+    disp[10] *= 0.3                                        # a 2-pixel mixture: 30 % and 70 % building
+    disp[11] *= 0.7
+    depth = disparity_to_depth(disp, 1.0, 0.0, max_depth=3000.0)
+    out = sky_mixed_edges(depth)
+    assert np.isposinf(out[10]).all()                      # mostly sky -> sky
+    beside_pole = np.zeros(W, bool)
+    beside_pole[28:36] = True
+    assert np.isposinf(out[11, beside_pole]).all()
+    assert np.array_equal(out[11, ~beside_pole], depth[11, ~beside_pole])  # mostly building: kept
+    assert np.array_equal(out[12:], depth[12:])            # away from the sky: untouched
+    assert np.array_equal(sky_mixed_edges(np.roll(depth, 32, axis=1)), np.roll(out, 32, axis=1))
+    no_sky = np.where(np.isfinite(depth), depth, 500.0)
+    assert np.array_equal(sky_mixed_edges(no_sky), no_sky)  # nothing to do without sky
 
 
 # --- alignment --------------------------------------------------------------------------------------
