@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -406,7 +407,17 @@ def markdown(results: dict, args, availability: dict, machine: str) -> str:
             continue
         means = [_mean([r.get(a, {}).get(b) for r in rs]) for a, b in cols]
         lines.append(f"| {variant} (n={len(rs)}) | " + " | ".join(_fmt(m) for m in means) + " |")
+    if getattr(args, "images", None) is not None and getattr(args, "out", None) is not None:
+        rel = Path(os.path.relpath(args.images, args.out.parent))
+        lines += ["", "Pictures (rows truth / G0 / G1 at the first 4 novel cameras; full method, first training seed): "
+                  + ", ".join(f"[{prompt}]({(rel / picture_name(prompt)).as_posix()})"
+                              for prompt, per in results.items() if "full" in per)]
     return "\n".join(lines) + "\n"
+
+
+def picture_name(prompt: str) -> str:
+    """File name of a scene's truth / G0 / G1 picture in the ``--images`` folder."""
+    return f"eval_{_slug(prompt)}.png"
 
 
 def paper_tables(results: dict) -> list[str]:
@@ -503,8 +514,10 @@ def main(argv: list[str] | None = None) -> int:
                         "--out / --images are not used")
     p.add_argument("--out", type=Path, default=Path("docs/eval.md"), help="markdown report")
     p.add_argument("--json", type=Path, default=None, help="also write every number as JSON")
-    p.add_argument("--images", type=Path, default=Path("docs/images"), help="folder for truth/G0/G1 pictures")
+    p.add_argument("--images", type=Path, default=None,
+                   help="folder for truth/G0/G1 pictures (default: images/ beside --out)")
     args = p.parse_args(argv)
+    args.images = args.images if args.images is not None else args.out.parent / "images"
     variants = list(VARIANTS) if args.variants == "all" else args.variants.split(",")
     from holoflow.nriqa import NIQE_MIN_SIDE
 
@@ -542,7 +555,7 @@ def main(argv: list[str] | None = None) -> int:
                 runs.append(r)
                 if variant == "full" and k == 0:
                     args.images.mkdir(parents=True, exist_ok=True)
-                    write_png(args.images / f"eval_{_slug(prompt)}.png", strip_image(renders))
+                    write_png(args.images / picture_name(prompt), strip_image(renders))
                 print(f"eval: {prompt!r} {variant} train_seed {k}: G0 novel {_fmt(r['G0']['novel']['psnr'])} dB, "
                       f"G1 novel {_fmt(r['G1']['novel']['psnr'])} dB, G1 base {_fmt(r['G1']['base']['psnr'])} dB",
                       file=sys.stderr)

@@ -2,6 +2,7 @@
 import argparse
 import json
 import math
+from pathlib import Path
 
 import torch
 
@@ -36,6 +37,10 @@ def test_report_formats_inf_nan_and_marks_unavailable_metrics():
     md = heval.markdown({"a room": {"full": r, "no_inp": r}}, args, {"lpips": "unavailable: x"}, "2-core CPU")
     assert "| a room | G1 | 12 | inf |" in md
     assert "lpips: unavailable" in md and "no_inp (n=1)" in md
+    assert "Pictures" not in md                                     # no --out / --images given: no links
+    args.out, args.images = Path("/x/report/eval.md"), Path("/x/report/images")
+    md = heval.markdown({"a room": {"full": r}}, args, {}, "2-core CPU")
+    assert "[a room](images/eval_a_room.png)" in md                  # relative to the report: the link works
 
 
 def test_repeats_are_averaged_leaf_by_leaf_and_the_gain_table_shows_their_spread():
