@@ -243,7 +243,7 @@ def _run_scenes(args, scenes, batch: bool) -> int:
 
 def cmd_status(args) -> int:
     from .runner import Context
-    from .status import describe_ran, status
+    from .status import describe_ran, engine_note, status
 
     pipe, store = _load(args)
     ctx = Context.build(pipe, store, _options(args))
@@ -255,7 +255,7 @@ def cmd_status(args) -> int:
     for name, s in st.items():
         why = "; ".join(s["reasons"]) or describe_ran(s.get("ran"))
         if s.get("engine"):
-            why = f"engine {s['engine']['ran']} ({s['engine']['why']}); {why}"
+            why = f"{engine_note({'engine': s['engine']['ran'], 'why': s['engine']['why']})}; {why}"
         print(f"{name:<{width}}  {s['state']:<7}  {why}".rstrip())
     return 0
 

@@ -274,6 +274,7 @@ def depth_engines(run_dir: Path) -> dict[str, str]:
     """stage -> what made it, for the stages that decide the depth (DEPTH_STAGES), from the run's
     run.json and the store's step records: the engine ("auto -> layout" where a chooser picked one),
     "used FILE" for a stage given by ``--use``, "unknown" where the record is missing."""
+    from holoflow.status import chosen_engine
     from holoflow.store import Store
 
     store = Store(run_dir.parent.parent)                      # runs/<id> lies in the store's root
@@ -287,8 +288,8 @@ def depth_engines(run_dir: Path) -> dict[str, str]:
         elif rec is None:
             out[name] = "unknown"
         else:
-            engine, chosen = rec["provenance"].get("engine"), rec["provenance"].get("meta", {}).get("engine")
-            picked = chosen.get("engine") if isinstance(chosen, dict) else None
+            engine, chosen = rec["provenance"].get("engine"), chosen_engine(rec)
+            picked = chosen["engine"] if chosen else None
             out[name] = f"{engine} -> {picked}" if picked and picked != engine else str(engine)
     return out
 

@@ -20,7 +20,7 @@ from typing import Any
 from .cachekey import CodeHasher, cache_key, components, tree_digest
 from .executors import StepTask
 from .pipeline import Pipeline, PipelineError, Resolved, check_files, profile_device, resolve
-from .status import dry_run, explain
+from .status import chosen_engine, dry_run, engine_note, explain
 from .uses import dropped_uses, import_use, parse_uses
 from .store import Store
 
@@ -467,7 +467,9 @@ class _Scheduler:
         del self.inflight[task.key]
         if task.replace:
             self.forced_done[task.key] = rec
-        note = _rss_note(rec) + (f" on {result['host']}" if self.executor.kind != "local" else "")
+        chosen = chosen_engine(rec)
+        note = (_rss_note(rec) + (f" on {result['host']}" if self.executor.kind != "local" else "")
+                + (f"; {engine_note(chosen)}" if chosen else ""))
         for i, (st, name) in enumerate(job.waiters):
             st.waiting.discard(name)
             st.outputs[name] = rec["outputs"]
@@ -499,11 +501,8 @@ def _made_with(store: Store, key: str | None, engine: str) -> tuple[str, str | N
     rec = store.record(key) if key else None
     if rec is None:
         return ("used", None) if key is None else (engine, None)
-    prov = rec["provenance"]
-    chosen = prov.get("meta", {}).get("engine")
-    if isinstance(chosen, dict) and chosen.get("engine"):
-        engine = chosen["engine"]
-    return engine, prov.get("device")
+    chosen = chosen_engine(rec)
+    return (chosen["engine"] if chosen else engine), rec["provenance"].get("device")
 
 
 def _finish_run(st: _SceneRun, latest: bool) -> None:

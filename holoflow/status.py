@@ -14,6 +14,18 @@ if TYPE_CHECKING:
     from .runner import Context
 
 
+
+def chosen_engine(rec: dict) -> dict | None:
+    """The engine a step chose itself (a depth stage's ``auto``) as its record's @meta says:
+    ``{"engine": NAME, "why": one line, ...}``; None for a step that ran the engine it was given."""
+    meta = rec.get("provenance", {}).get("meta", {}).get("engine")
+    return meta if isinstance(meta, dict) and meta.get("engine") else None
+
+
+def engine_note(chosen: dict) -> str:
+    """'engine NAME (why)' for a ``chosen_engine``."""
+    return f"engine {chosen['engine']}" + (f" ({chosen['why']})" if chosen.get("why") else "")
+
 def dry_run(ctx: Context, order: list[str], selected: set[str], forced: set[str]) -> dict[str, Any]:
     """What a run would do, without locking or running anything."""
     plan = status(ctx, order)
@@ -67,9 +79,9 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
             missing = [rel for rel, e in rec["outputs"].items() if not store.check(e)]
             if not missing:
                 out[name] = {"state": "fresh", "reasons": [], "key": key, "ran": ran_info(rec)}
-                meta = rec.get("provenance", {}).get("meta", {}).get("engine")
-                if isinstance(meta, dict) and meta.get("why"):  # an engine the step chose itself (auto)
-                    out[name]["engine"] = {"ran": meta.get("engine"), "why": meta["why"]}
+                chosen = chosen_engine(rec)
+                if chosen is not None:
+                    out[name]["engine"] = {"ran": chosen["engine"], "why": chosen.get("why", "")}
                 outputs[name] = rec["outputs"]
                 continue
             out[name] = {"state": "missing", "key": key,

@@ -166,3 +166,14 @@ def test_warm_templates_are_started_for_every_step_at_the_first_submit(project, 
     monkeypatch.setattr(LocalExecutor, "expect", lambda self, needs: (calls.append(needs), real(self, needs))[1])
     project.run_json("p", capsys=capsys)
     assert len(calls) == 1 and len(calls[0]) == 3               # gen, upper, join: all known at the start
+
+
+def test_an_engine_the_step_chose_is_named_by_run_and_status(project, capsys):
+    rc, out, err = project.cli("run", "p", "--set", "gen.engine=fancy", capsys=capsys)
+    assert rc == 0, err
+    line = next(ln for ln in (out + err).splitlines() if "gen: ran" in ln)
+    assert line.endswith("; engine fancy-v2 (fancy: the toy picks its v2)")
+    assert not any("; engine" in ln for ln in (out + err).splitlines() if "upper: ran" in ln)  # chose nothing
+    rc, out, _ = project.cli("status", "--set", "gen.engine=fancy", capsys=capsys)
+    assert "engine fancy-v2 (fancy: the toy picks its v2)" in next(ln for ln in out.splitlines() if ln.startswith("gen"))
+
