@@ -67,7 +67,6 @@ def detail_input(store: Path, width: int) -> np.ndarray:
     engines receive."""
     from holoflow.depth.io import read_pano
     from holoflow.depth.panorama import resize_pano
-
     from holoflow.store import Store
 
     st = Store(store)
@@ -114,7 +113,8 @@ def turned_abs_rel(pano: np.ndarray, truth: np.ndarray, scale: str, turns: int) 
 
 
 def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="holoflow bench realdepth", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = argparse.ArgumentParser(prog="holoflow bench realdepth",
+                                 description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--data", default=str(DATA), help="folder of NAME_rgb.png + NAME_depth.exr")
     ap.add_argument("--out", default="docs", help="folder for bench-realdepth.md (images/ beneath it)")
     ap.add_argument("--prompts", default="|".join(PROMPTS), help="procedural scenes, '|'-separated ('' = none)")
@@ -265,5 +265,6 @@ def write_table(path: Path, rows, proc_rows, seconds: float, data: Path) -> None
                          f"{f(r['prior'], 'abs_rel')} / {f(r['prior'], 'delta1')} | "
                          f"{f(r['layout'], 'abs_rel')} / {f(r['layout'], 'delta1')} |")
     lines += ["", "Pictures (image | truth / default | default / truth; depth as log depth 0.5-20 m, bright = "
-              "near, black = no value or sky; error red = too far, blue = too near, full at a factor of 3): " + ", ".join(f"[{r['name']}](images/realdepth-{r['name']}.png)" for r in rows), ""]
+              "near, black = no value or sky; error red = too far, blue = too near, full at a factor of 3): "
+              + ", ".join(f"[{r['name']}](images/realdepth-{r['name']}.png)" for r in rows), ""]
     path.write_text("\n".join(lines))

@@ -175,5 +175,6 @@ def test_an_engine_the_step_chose_is_named_by_run_and_status(project, capsys):
     assert line.endswith("; engine fancy-v2 (fancy: the toy picks its v2)")
     assert not any("; engine" in ln for ln in (out + err).splitlines() if "upper: ran" in ln)  # chose nothing
     rc, out, _ = project.cli("status", "--set", "gen.engine=fancy", capsys=capsys)
-    assert "engine fancy-v2 (fancy: the toy picks its v2)" in next(ln for ln in out.splitlines() if ln.startswith("gen"))
+    gen = next(ln for ln in out.splitlines() if ln.startswith("gen"))
+    assert "engine fancy-v2 (fancy: the toy picks its v2)" in gen
 
