@@ -14,7 +14,6 @@ if TYPE_CHECKING:
     from .runner import Context
 
 
-
 def chosen_engine(rec: dict) -> dict | None:
     """The engine a step chose itself (a depth stage's ``auto``) as its record's @meta says:
     ``{"engine": NAME, "why": one line, ...}``; None for a step that ran the engine it was given."""
@@ -25,6 +24,7 @@ def chosen_engine(rec: dict) -> dict | None:
 def engine_note(chosen: dict) -> str:
     """'engine NAME (why)' for a ``chosen_engine``."""
     return f"engine {chosen['engine']}" + (f" ({chosen['why']})" if chosen.get("why") else "")
+
 
 def dry_run(ctx: Context, order: list[str], selected: set[str], forced: set[str]) -> dict[str, Any]:
     """What a run would do, without locking or running anything."""

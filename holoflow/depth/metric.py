@@ -73,10 +73,12 @@ def sky_mixed_edges(depth: np.ndarray, reach: int = 2) -> np.ndarray:
     twice as near goes to the sky too (at most ``reach`` pixels of a far silhouette lost, rather than
     points thrown up to max_depth).
     """
-    import scipy.ndimage as ndi
-
     depth = np.asarray(depth, dtype=np.float64)
     disp = np.where(np.isfinite(depth) & (depth > 0), 1.0 / np.where(depth > 0, depth, 1.0), 0.0)  # [H, W]
+    if disp.all():  # no sky (a room): nothing to do
+        return depth
+    import scipy.ndimage as ndi
+
     size, mode = 2 * reach + 1, ("nearest", "wrap")
     near_sky = ndi.minimum_filter(disp, size=size, mode=mode) == 0.0
     mixed = (disp > 0) & near_sky & (disp < 0.5 * ndi.maximum_filter(disp, size=size, mode=mode))
