@@ -279,7 +279,18 @@ def test_without_depth_same_colour_alpha_and_gradients(backend):
         outs.append((out, torch.autograd.grad(loss, [p[k] for k in NAMES])))
     (a, ga), (b, gb) = outs
     assert b["depth"] is None and a["depth"].shape == a["alpha"].shape
+    # The cpu backend composites each channel in its own scalar loop, so dropping the depth channel
+    # cannot change the others' bits on any CPU. The dense reference backend does it as one batched
+    # matmul over 5 or 4 channels, and MKL may pick a different kernel (another summation order) for
+    # each shape on another CPU (seen on AMD EPYC): equal to float64 rounding there, not bit-equal.
+    exact = backend == "cpu"
     for k in ("rgb", "alpha"):
-        assert torch.equal(a[k], b[k]), k
+        if exact:
+            assert torch.equal(a[k], b[k]), k
+        else:
+            torch.testing.assert_close(a[k], b[k], rtol=1e-12, atol=1e-12)
     for x, y in zip(ga, gb):
-        assert torch.equal(x, y)
+        if exact:
+            assert torch.equal(x, y)
+        else:
+            torch.testing.assert_close(x, y, rtol=1e-12, atol=1e-12)
