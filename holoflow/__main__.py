@@ -1,6 +1,6 @@
 """`python -m holoflow ...` is the `holoflow` command."""
 import sys
 
-from .cli import main
+from .commands import main
 
 sys.exit(main())

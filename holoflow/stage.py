@@ -76,7 +76,7 @@ class Job:
         torch.set_num_threads(n)
 
     def config(self, cls: type[P]) -> P:
-        """The step's params as the stage's typed class (holoflow/params.py), every value checked."""
+        """The step's params as the stage's typed class (holoflow/flow/params.py), every value checked."""
         return cls.from_params(self.params)
 
     @classmethod

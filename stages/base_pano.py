@@ -4,7 +4,7 @@ Engines (holoflow.scene.config.BasePanoParams.ENGINES): ``procedural`` (default,
 words build a Scene (holoflow.scene) that is ray-cast to the panorama; Z holds the exact radial depth
 (+inf for sky) and scene.json the scene, so later stages can render truth from any camera.
 ``diffusion360``: the paper's Diffusion360 base model with circular latent blending
-(holoflow.engines.diffusion360); no depth.
+(holoflow.networks.diffusion360); no depth.
 """
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 Engines (holoflow.imageops.config.DetailParams.ENGINES): ``classical`` (default, offline): wrap-aware
 Lanczos to the stage size, then a guided-filter base / detail split with the detail boosted by
 ``strength`` (holoflow.imageops.detail). ``controlnet_tile``: ControlNet Tile img2img on overlapping
-tiles with circular blending across the seam (holoflow.engines.controlnet_tile).
+tiles with circular blending across the seam (holoflow.networks.controlnet_tile).
 """
 from __future__ import annotations
 

@@ -16,11 +16,12 @@ def main() -> int:
     from holoflow.depth import panorama as pd
     from holoflow.depth.config import MetricAlignParams
     from holoflow.depth.io import read_disparity, read_pano, read_truth
+    from holoflow.geometry.sampling import resize_pano
     from holoflow.io.exr import write_exr
 
     cfg = job.config(MetricAlignParams)
     disparity = read_disparity(job.input_file("disparity", "disparity.exr"))
-    pano = pd.resize_pano(read_pano(job.input_file("pano", "pano.exr")), disparity.shape[1])
+    pano = resize_pano(read_pano(job.input_file("pano", "pano.exr")), disparity.shape[1])
     truth = read_truth(job.inputs.get("truth"))
     result = pd.metric_from_disparity(disparity, pano, truth, job.engine, cfg, job.seed, job.device, job.progress)
     write_exr(job.output("depth.exr"), {"Z": result.depth},

@@ -5,7 +5,7 @@ Engines (holoflow.imageops.config.StylizeParams.ENGINES): ``classical`` (default
 XDoG lineart, then the OpenCV style named by the prompt's style words (holoflow.imageops.styles;
 ``style`` param: auto | none | a style name); no style word -> passthrough. ``controlnet_lineart``:
 SD 1.5 + ControlNet Lineart conditioned on the lineart of the base panorama
-(holoflow.engines.controlnet_lineart).
+(holoflow.networks.controlnet_lineart).
 """
 from __future__ import annotations
 

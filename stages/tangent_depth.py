@@ -18,10 +18,11 @@ def main() -> int:
     from holoflow.depth import panorama as pd
     from holoflow.depth.config import TangentDepthParams
     from holoflow.depth.io import read_pano, read_truth
+    from holoflow.geometry.sampling import resize_pano
     from holoflow.io.exr import write_exr
 
     cfg = job.config(TangentDepthParams)
-    pano = pd.resize_pano(read_pano(job.input_file("pano", "pano.exr")), cfg.width)
+    pano = resize_pano(read_pano(job.input_file("pano", "pano.exr")), cfg.width)
     truth = read_truth(job.inputs.get("truth"))
     result = pd.estimate_disparity(pano, truth, job.engine, cfg, job.seed, job.device, job.progress)
     attrs = {"holoflow.stage": "tangent_depth", "holoflow.depth_kind": "disparity",

@@ -2,7 +2,7 @@
 
 Engines (holoflow.imageops.config.UpscaleParams.ENGINES): ``lanczos`` (default, offline): wrap-aware
 Lanczos-3 through OpenImageIO (holoflow.imageops.resize). ``realesrgan``: Real-ESRGAN (RRDBNet), tiled,
-wrap-padded at the seam (holoflow.engines.realesrgan).
+wrap-padded at the seam (holoflow.networks.realesrgan).
 """
 from __future__ import annotations
 

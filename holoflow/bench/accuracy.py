@@ -13,7 +13,7 @@ stages its change reaches and a killed sweep resumes where it stopped. Per point
   fresh run of that configuration costs;
 - accuracy: depth AbsRel / delta1 of metric_align against truth (``metric_align.json``); PSNR / SSIM
   of G0 (pre_opt) and G1 (transfer_opt) at the base cameras against the PANO set (the paper's
-  protocol) and at seeded novel cameras off the centre against true renders (``holoflow.eval``),
+  protocol) and at seeded novel cameras off the centre against true renders (``holoflow.evaluation``),
   the novel cameras at one fixed size and field of view for every point, so points compare.
 
 Writes a CSV (one row per point), a Pareto plot (time vs novel-view PSNR, time vs AbsRel) and the
@@ -126,15 +126,16 @@ def score_run(run_dir: Path, novel: int, novel_size: int, novel_fov: float, offs
               backend: str, cache: dict) -> dict:
     """Accuracy of one run folder: depth truth metrics, then G0 / G1 PSNR / SSIM at the base cameras
     (vs the PANO set) and at ``novel`` seeded cameras (vs true renders, ``novel_size`` px square,
-    ``novel_fov`` deg), scored by ``holoflow.eval``. Flat dict of floats."""
-    from holoflow import eval as heval
+    ``novel_fov`` deg), scored by ``holoflow.evaluation``. Flat dict of floats."""
+    from holoflow.evaluation.cameras import Views, base_views, novel_cameras, true_views
+    from holoflow.evaluation.scores import score_models
 
     depth = json.loads((run_dir / "metric_align" / "metric_align.json").read_text()).get("truth_metrics", {})
-    scene, base = heval.base_views(run_dir)
+    scene, base = base_views(run_dir)
     K = novel_intrinsics(novel_size, novel_fov)
-    novel_vm = heval.novel_cameras(scene, novel, offset, seed)         # [novel, 4, 4]
-    novel_views = heval.Views(novel_vm, K, heval.true_views(scene, novel_vm, K, novel_size, novel_size, cache=cache))
-    scores, _ = heval.score_models(run_dir, {"base": base, "novel": novel_views}, backend)
+    novel_vm = novel_cameras(scene, novel, offset, seed)         # [novel, 4, 4]
+    novel_views = Views(novel_vm, K, true_views(scene, novel_vm, K, novel_size, novel_size, cache=cache))
+    scores, _ = score_models(run_dir, {"base": base, "novel": novel_views}, backend)
     out = {"abs_rel": depth.get("abs_rel", math.nan), "delta1": depth.get("delta1", math.nan)}
     for tag, s in scores.items():
         t = tag.lower()
@@ -147,13 +148,13 @@ def score_run(run_dir: Path, novel: int, novel_size: int, novel_fov: float, offs
 def measure(point: Point, args, store_root: Path, cache: dict) -> tuple[dict, Path]:
     """Run (or serve from the store) one point and score it: (one CSV row, the run folder). The pipeline part holds
     ``args.lock`` (an flock shared with other timing runs); scoring does not."""
-    from holoflow import eval as heval
-    from holoflow.store import Store
+    from holoflow.evaluation.runs import run_pipeline
+    from holoflow.flow.store import Store
 
     with _flock(args.lock):
         load = os.getloadavg()[0]
         t0 = time.monotonic()
-        run_dir, summary = heval.run_pipeline(args.prompt, point.profile, list(point.sets) + args.sets, store_root)
+        run_dir, summary = run_pipeline(args.prompt, point.profile, list(point.sets) + args.sets, store_root)
         run_s = time.monotonic() - t0
     costs = stage_costs(Store(store_root), summary)
     row = {"point": point.name, "axis": point.axis, "label": point.label, "profile": point.profile,
@@ -254,7 +255,7 @@ def extrapolate(rows: list[dict], drivers: list[dict], target: dict, key: str = 
 
 
 def resolved_params(profile: str, sets: list[str]) -> dict[str, dict]:
-    from holoflow import pipeline
+    from holoflow.flow import pipeline
 
     pipe = pipeline.load(Path(__file__).resolve().parents[2] / "pipeline.yaml")
     return {n: r.params for n, r in pipeline.resolve(pipe, profile, sets).items()}
@@ -444,7 +445,7 @@ def stage_pictures(run_dir: Path, folder: Path, prefix: str = "accuracy-base") -
 
 
 def main(argv: list[str] | None = None) -> int:
-    from holoflow.bench import machine
+    from holoflow.evaluation.machine import machine
 
     ap = argparse.ArgumentParser(prog="holoflow bench accuracy", description=__doc__.split("\n\n")[0])
     ap.add_argument("--prompt", default=PROMPT, help="procedural scene")

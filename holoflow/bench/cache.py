@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from holoflow.bench import load, machine
+from holoflow.evaluation.machine import load, machine
 
 GEN = '''import random, sys
 size, seed, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from holoflow.bench import load, machine
+from holoflow.evaluation.machine import load, machine
 
 INDOOR = ("a cozy living room with a sofa and a lamp", "a bedroom with a wooden bed",
           "a modern kitchen with a table")

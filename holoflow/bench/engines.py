@@ -1,7 +1,7 @@
 """`holoflow bench engines`: time each real-model engine at preview and paper resolutions (docs/engines-bench.md).
 
-The benchmark itself lives beside the engines in holoflow/engines/bench.py; this module is its `holoflow bench` name.
+The benchmark itself lives beside the engines in holoflow/networks/bench.py; this module is its `holoflow bench` name.
 """
-from holoflow.engines.bench import main
+from holoflow.networks.bench import main
 
 __all__ = ["main"]

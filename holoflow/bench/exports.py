@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from holoflow.bench import load, machine
+from holoflow.evaluation.machine import load, machine
 
 #: antimatter15 .splat record: position f32 x3, scale f32 x3, RGBA u8 x4, quaternion u8 x4 (w, x, y, z)
 SPLAT_RECORD = np.dtype([("p", "<f4", 3), ("s", "<f4", 3), ("c", "u1", 4), ("q", "u1", 4)])
@@ -49,7 +49,7 @@ def fidelity(run: Path) -> list[tuple[str, int, float, float]]:
     splat export of the run folder ``run`` (module docstring); dB."""
     import torch
 
-    from holoflow.metrics import psnr
+    from holoflow.quality.metrics import psnr
     from holoflow.recon.views import load_view_set, stack_cameras
     from holoflow.splat.model import GaussianModel
     from holoflow.splat.rasterize import rasterize, render

@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from holoflow.bench import machine
+from holoflow.evaluation.machine import machine
 
 VIEWS = {  # name -> (lon deg, lat deg) of the optical axis (py360convert's u_deg, v_deg)
     "front": (0.0, 0.0), "seam": (180.0, 0.0), "north pole": (0.0, 90.0), "south pole": (0.0, -90.0),

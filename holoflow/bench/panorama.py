@@ -14,7 +14,7 @@ import re
 import time
 from pathlib import Path
 
-from holoflow.bench import machine
+from holoflow.evaluation.machine import machine
 
 SHOWCASE = {  # preview name -> prompt: indoor, outdoor, stylized
     "living-room": "a cozy living room with a red sofa and wooden shelves",

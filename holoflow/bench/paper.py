@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from . import machine
+from holoflow.evaluation.machine import machine
 
 
 def gpu_name() -> str:
@@ -46,7 +46,7 @@ def main(argv: list[str]) -> int:
     with tempfile.TemporaryDirectory(prefix="holoflow-bench-paper-") as tmp:
         models, t_models = args.models, None
         if models is None:
-            from holoflow.models import write_random
+            from holoflow.networks.manifest import write_random
 
             models = str(Path(tmp) / "models")
             t0 = time.perf_counter()
@@ -75,7 +75,7 @@ def main(argv: list[str]) -> int:
 
 def stage_rows(store: Path, summary: dict) -> list[dict]:
     """Per stage: engine, device, wall s, peak GPU MiB, peak RSS MiB and the step's own figures."""
-    from holoflow.store import Store
+    from holoflow.flow.store import Store
 
     st = Store(store)
     rows = []

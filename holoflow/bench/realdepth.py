@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from holoflow.bench import load, machine
+from holoflow.evaluation.machine import load, machine
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "realdepth"
 PROMPTS = ("a cozy living room with a sofa and a lamp", "a sunny meadow with trees")
@@ -44,7 +44,7 @@ def run_pipeline(store: Path, prompt: str, extra: list[str]) -> tuple[np.ndarray
     """``holoflow run PROMPT EXTRA --until metric_align`` in ``store``; (depth [H, W], metric_align.json,
     seconds the two depth steps took in that run: the sum of their records' ``wall_s``, 0 if cached)."""
     from holoflow.io.exr import read_exr
-    from holoflow.store import Store
+    from holoflow.flow.store import Store
 
     env = {**os.environ, "HOLOFLOW_STORE": str(store)}
     root = Path(__file__).resolve().parents[2]
@@ -66,8 +66,8 @@ def detail_input(store: Path, width: int) -> np.ndarray:
     """The latest run's detail panorama (linear RGB [H, W, 3]) resized to ``width``: what the depth
     engines receive."""
     from holoflow.depth.io import read_pano
-    from holoflow.depth.panorama import resize_pano
-    from holoflow.store import Store
+    from holoflow.geometry.sampling import resize_pano
+    from holoflow.flow.store import Store
 
     st = Store(store)
     return resize_pano(read_pano(st.run_dir(st.run_ids()[-1]) / "detail" / "pano.exr"), width)

@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from . import machine
+from holoflow.evaluation.machine import machine
 
 PROMPTS = ["a small wooden cabin", "a foggy forest at dawn", "a red brick room with a lamp",
            "a sunny beach with palm trees", "a cozy library at night", "a snowy mountain hut",

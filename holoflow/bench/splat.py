@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from holoflow.bench import machine
+from holoflow.evaluation.machine import machine
 
 CONFIGS = [(1_000, 128), (10_000, 128), (10_000, 256), (10_000, 512), (100_000, 128),
            (100_000, 256), (100_000, 512), (1_000_000, 128), (1_000_000, 256), (1_000_000, 512)]

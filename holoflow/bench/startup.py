@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from holoflow.bench import load, machine
+from holoflow.evaluation.machine import load, machine
 
 PROMPT = "a cozy wooden cabin at night"
 
@@ -46,11 +46,11 @@ def main(argv: list[str]) -> int:
 
 def step_startup(pipe_path: Path, rounds: int) -> list[tuple[str, list[float], list[float]]]:
     """Per stage: (name, cold seconds per round, warm seconds per round) of its import probe."""
-    from holoflow.cachekey import CodeHasher
-    from holoflow.executors import step_env
-    from holoflow.executors.step import ExecStep
-    from holoflow.executors.warm import Launcher, preload
-    from holoflow.pipeline import load as load_pipeline
+    from holoflow.flow.cachekey import CodeHasher
+    from holoflow.flow.executors import step_env
+    from holoflow.flow.executors.step import ExecStep
+    from holoflow.flow.executors.warm import Launcher, preload
+    from holoflow.flow.pipeline import load as load_pipeline
 
     pipe = load_pipeline(pipe_path)
     hasher = CodeHasher(pipe.root, None)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from holoflow.params import Engines, StageParams, param
+from holoflow.flow.params import Engines, StageParams, param
 
 _FACES = ("(images: [F, h, w, 3] linear, dirs: [F, h, w, 3], cos: [F, h, w], truth_radial: [F, h, w] m | None,"
           " seed, cfg: {cls}, device: str, progress, pano: [H, W, 3] linear)")
@@ -20,6 +20,7 @@ class TangentDepthParams(StageParams):
     ENGINES = Engines(
         "engine" + _FACES.format(cls="TangentDepthParams") + " -> (perspective disparity [F, h, w], facts: dict)",
         _AUTO,
+        weights={"depth_anything": (("model", "depth_anything"),)},
         simulated="holoflow.depth.engines:simulated_relative_engine",
         prior="holoflow.depth.engines:prior_relative_engine",
         layout="holoflow.depth.engines:layout_relative_engine",
@@ -51,6 +52,7 @@ class MetricAlignParams(StageParams):
     ENGINES = Engines(
         "engine" + _FACES.format(cls="MetricAlignParams") + " -> (perspective depth z [F, h, w] m, facts: dict)",
         _AUTO,
+        weights={"zoedepth": (("model", "zoedepth"),)},
         simulated="holoflow.depth.engines:simulated_metric_engine",
         prior="holoflow.depth.engines:prior_metric_engine",
         layout="holoflow.depth.engines:layout_metric_engine",

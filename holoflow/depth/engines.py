@@ -20,7 +20,7 @@ Engines (registered by name in holoflow/depth/config.py; docs/depth.md says what
 ``layout`` (no weights, any panorama): the image-driven estimator of holoflow.depth.layout (a room
   layout indoors, ground / vertical / sky outdoors), computed once on the whole panorama and sampled
   into the faces; its metric scale comes from the camera height (``cfg.camera_height``).
-``depth_anything`` / ``zoedepth``: the paper's networks through holoflow.engines (real weights).
+``depth_anything`` / ``zoedepth``: the paper's networks through holoflow.networks (real weights).
 ``auto`` (the default): ``simulated`` when the input carries a truth depth (procedural scenes), else
   ``layout``; ``resolve_engine`` says which and why.
 """
@@ -30,7 +30,7 @@ from typing import Callable
 
 import numpy as np
 
-#: progress callback: (done, total, what), as holoflow.stage.Job.progress and holoflow.engines take it
+#: progress callback: (done, total, what), as holoflow.stage.Job.progress and holoflow.networks take it
 Progress = Callable[[int, int, str], None] | None
 
 #: simulated relative engine; sizes are fractions of the face side so any face size behaves alike
@@ -144,8 +144,8 @@ def prior_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: st
 
 def depth_anything_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
                           progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
-    """``depth_anything`` relative engine (holoflow.engines.depth_anything; weights: ``cfg.model``)."""
-    from holoflow.engines import depth_anything
+    """``depth_anything`` relative engine (holoflow.networks.depth_anything; weights: ``cfg.model``)."""
+    from holoflow.networks import depth_anything
 
     out = depth_anything.relative_disparity(images, cfg.model, device, progress)
     return np.asarray(out, dtype=np.float32), {"engine": "depth_anything", "model": cfg.model}
@@ -170,8 +170,8 @@ def prior_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str 
 
 def zoedepth_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
                     progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
-    """``zoedepth`` metric engine (holoflow.engines.zoedepth; weights: ``cfg.model``)."""
-    from holoflow.engines import zoedepth
+    """``zoedepth`` metric engine (holoflow.networks.zoedepth; weights: ``cfg.model``)."""
+    from holoflow.networks import zoedepth
 
     out = zoedepth.metric_depth(images, cfg.model, device, progress)
     return np.asarray(out, dtype=np.float32), {"engine": "zoedepth", "model": cfg.model}

@@ -291,7 +291,7 @@ def estimate_layout_depth(pano: np.ndarray, cfg: LayoutConfig | None = None,
     Wk = max(16, min(int(cfg.work_width), pano.shape[1]))
     Wk -= Wk % 2
     Hk = Wk // 2
-    from holoflow.depth.panorama import resize_pano
+    from holoflow.geometry.sampling import resize_pano
 
     work = resize_pano(pano, Wk)
     # exposure-normalise so a dark or HDR (> 1) panorama is analysed like a well-exposed one

@@ -39,20 +39,6 @@ def icosahedron_faces(face_size: int, padding: float):
     return tangent_faces(padding=padding, size=face_size)
 
 
-def resize_pano(pano: np.ndarray, width: int) -> np.ndarray:
-    """Linear RGB panorama [H, W, 3] resized (wrap-aware, antialiased) to width x width / 2."""
-    import torch
-
-    from holoflow.geometry.sampling import resize_equirect
-
-    H, W = pano.shape[:2]
-    height = max(1, width // 2)
-    if (H, W) == (height, width):
-        return np.asarray(pano, dtype=np.float32)
-    t = torch.from_numpy(np.ascontiguousarray(pano, dtype=np.float32)).permute(2, 0, 1)
-    return resize_equirect(t, height, width).permute(1, 2, 0).numpy()
-
-
 def resize_radial(radial: np.ndarray, height: int, width: int) -> np.ndarray:
     """Radial depth [H, W] -> [height, width] by the nearest source pixel (no mixing across edges or
     with sky)."""

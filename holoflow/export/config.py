@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from holoflow.params import Engines, ParamError, StageParams, param
+from holoflow.flow.params import Engines, ParamError, StageParams, param
 
 #: every format the export stage writes, in the order it writes them, with its file name
 FORMATS = {"spz": "scene.spz", "splat": "scene.splat", "compressed_ply": "scene.compressed.ply",
@@ -18,7 +18,7 @@ class ExportParams(StageParams):
 
     ENGINES = Engines("one engine, the writers: export_formats(scene fields, out_dir, formats) "
                       "(holoflow/export/splats.py)",
-                      default="holoflow.export.splats:export_formats")
+                      default="holoflow.export.formats:export_formats")
 
     formats: str = param("all", "comma list of spz, splat, compressed_ply, glb, mesh; or all")
     mesh_width: int = param(0, "mesh.glb's equirect grid width; 0 = P_f's resolution, half the depth "

@@ -21,7 +21,6 @@ from __future__ import annotations
 import gzip
 import struct
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 
@@ -250,22 +249,3 @@ def _morton_order(means: np.ndarray) -> np.ndarray:
 
 def _u8(x: np.ndarray) -> np.ndarray:
     return np.clip(np.round(x), 0, 255).astype(np.uint8)
-
-
-# -- the stage's engine ----------------------------------------------------------------------------
-def export_formats(fields: dict[str, np.ndarray], out_dir: str | Path, formats: list[str]) -> dict[str, int]:
-    """Write the Gaussian formats among ``formats`` (spz, splat, compressed_ply, glb) of a 3DGS PLY's
-    ``fields`` into ``out_dir`` (file names: holoflow.export.config.FORMATS); returns {file: bytes}."""
-    from holoflow.export.config import FORMATS
-    from holoflow.export.gltf import gaussians_glb_bytes
-
-    s = activate(fields)
-    writers = {"spz": spz_bytes, "splat": splat_bytes, "compressed_ply": compressed_ply_bytes,
-               "glb": gaussians_glb_bytes}
-    sizes = {}
-    for fmt in formats:
-        if fmt in writers:
-            data = writers[fmt](s)
-            (Path(out_dir) / FORMATS[fmt]).write_bytes(data)
-            sizes[FORMATS[fmt]] = len(data)
-    return sizes

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from holoflow.params import Engines, StageParams, param
+from holoflow.flow.params import Engines, StageParams, param
 
 
 @dataclass(frozen=True)

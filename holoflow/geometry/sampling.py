@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -277,3 +278,13 @@ def resize_equirect(pano: torch.Tensor, height: int, width: int) -> torch.Tensor
     out = F.interpolate(x, size=(height, width + 2 * q), mode="bilinear", align_corners=False,
                         antialias=(height < H or width < W))
     return out[..., q:q + width].reshape(*lead, pano.shape[-3], height, width)
+
+
+def resize_pano(pano: np.ndarray, width: int) -> np.ndarray:
+    """Linear RGB panorama [H, W, 3] resized (wrap-aware, antialiased) to width x width / 2."""
+    H, W = pano.shape[:2]
+    height = max(1, width // 2)
+    if (H, W) == (height, width):
+        return np.asarray(pano, dtype=np.float32)
+    t = torch.from_numpy(np.ascontiguousarray(pano, dtype=np.float32)).permute(2, 0, 1)
+    return resize_equirect(t, height, width).permute(1, 2, 0).numpy()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from holoflow.params import Engines, StageParams, param
+from holoflow.flow.params import Engines, StageParams, param
 
 
 @dataclass(frozen=True)
@@ -14,8 +14,9 @@ class StylizeParams(StageParams):
     ENGINES = Engines(
         "engine(base: [H, W, 3] linear, prompt: str, cfg: StylizeParams, seed: int, device: str, progress)"
         " -> Stylized",
+        weights={"controlnet_lineart": (("model", "sd15"), ("controlnet", "controlnet_lineart"))},
         classical="holoflow.imageops.engines:stylize_classical",
-        controlnet_lineart="holoflow.engines.controlnet_lineart:stylize_engine")
+        controlnet_lineart="holoflow.networks.controlnet_lineart:stylize_engine")
 
     width: int = param(1024, "output width (lineart and stylized panorama)", "px", ge=1)
     height: int = param(512, "output height", "px", ge=1)
@@ -34,8 +35,9 @@ class UpscaleParams(StageParams):
     ENGINES = Engines(
         "engine(pano: [H, W, 3] linear, prompt: str, cfg: UpscaleParams, seed: int, device: str, progress)"
         " -> ([h, w, 3] linear, meta: dict)",
+        weights={"realesrgan": (("model", "realesrgan"),)},
         lanczos="holoflow.imageops.engines:upscale_lanczos",
-        realesrgan="holoflow.engines.realesrgan:upscale_engine")
+        realesrgan="holoflow.networks.realesrgan:upscale_engine")
 
     width: int = param(2048, "output width", "px", ge=1)
     height: int = param(1024, "output height", "px", ge=1)
@@ -50,8 +52,9 @@ class DetailParams(StageParams):
     ENGINES = Engines(
         "engine(pano: [H, W, 3] linear, prompt: str, cfg: DetailParams, seed: int, device: str, progress)"
         " -> ([h, w, 3] linear, meta: dict)",
+        weights={"controlnet_tile": (("model", "tile_base"), ("controlnet", "controlnet_tile"))},
         classical="holoflow.imageops.engines:detail_classical",
-        controlnet_tile="holoflow.engines.controlnet_tile:detail_engine")
+        controlnet_tile="holoflow.networks.controlnet_tile:detail_engine")
 
     width: int = param(2048, "output width", "px", ge=1)
     height: int = param(1024, "output height", "px", ge=1)

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from holoflow.params import Engines, StageParams, param
+from holoflow.flow.params import Engines, StageParams, param
 
 _RASTER = "holoflow.splat.rasterize:rasterize"     # one contract, the backend picked by name
 _SPLAT_ENGINES = Engines("rasterize(..., backend=ENGINE): the rasterizer every training step and render use",
                          {"auto": "gsplat when the run's device is cuda, else cpu (resolved before the cache key)"},
+                         on_device={"auto": {"cuda": "gsplat", "cpu": "cpu"}},
                          cpu=_RASTER, gsplat=_RASTER, reference=_RASTER)
 
 
@@ -63,6 +64,7 @@ class InpSetParams(StageParams):
     ENGINES = Engines(
         "engine(images: [N, H, W, 3] sRGB, masks: [N, H, W] bool, depths: [N, H, W] m | None,"
         " cfg: InpSetParams, device: str, progress) -> [N, H, W, 3] sRGB",
+        weights={"lama": (("model", "lama"),)},
         opencv="holoflow.recon.inpaint:opencv_engine",
         lama="holoflow.recon.inpaint:lama_engine")
 

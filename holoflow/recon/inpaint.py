@@ -16,7 +16,7 @@ are passed through un-inpainted.
 
 Engines: ``opencv`` (classical, no weights; ``method`` background = ``background_fill`` then telea
 for what it cannot reach, telea | ns via ``cv2.inpaint``, fsr_fast | fsr_best via
-``cv2.xphoto.inpaint``) and ``lama`` (``holoflow.engines.lama``). Images are
+``cv2.xphoto.inpaint``) and ``lama`` (``holoflow.networks.lama``). Images are
 display-referred sRGB [N, H, W, 3] in [0, 1]: the inpainters are built for display images. Observed
 pixels are returned bit-exact; only missing pixels change.
 """
@@ -171,12 +171,12 @@ def opencv_engine(images: np.ndarray, masks: np.ndarray, depths: np.ndarray | No
 
 def lama_engine(images: np.ndarray, masks: np.ndarray, depths: np.ndarray | None, cfg: InpSetParams,
                 device: str = "cpu", progress=None) -> np.ndarray:
-    """inp_set's ``lama`` engine (holoflow.engines.lama, weights: cfg.model); LaMa takes linear RGB."""
+    """inp_set's ``lama`` engine (holoflow.networks.lama, weights: cfg.model); LaMa takes linear RGB."""
     import torch
 
-    from holoflow.engines import lama
-    from holoflow.recon.views import linear_to_srgb, srgb_to_linear
+    from holoflow.networks import lama
+    from holoflow.imageops.color import linear_to_srgb_torch, srgb_to_linear_torch
 
-    linear = srgb_to_linear(torch.from_numpy(images)).numpy()
+    linear = srgb_to_linear_torch(torch.from_numpy(images)).numpy()
     filled = lama.inpaint(linear, masks.astype(np.float32), cfg.model, device, progress)
-    return linear_to_srgb(torch.from_numpy(np.asarray(filled, np.float32))).numpy()
+    return linear_to_srgb_torch(torch.from_numpy(np.asarray(filled, np.float32))).numpy()

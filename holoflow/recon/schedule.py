@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from holoflow import metrics
+from holoflow.quality import metrics
 from holoflow.recon.config import OptimParams, PreOptParams, TransferOptParams
 
 Progress = Callable[[int, int], None]

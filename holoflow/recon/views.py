@@ -18,22 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from holoflow.imageops.color import linear_to_srgb_torch, srgb_to_linear_torch
 from holoflow.io.exr import read_exr, write_rgb
-
-
-def linear_to_srgb(x: torch.Tensor) -> torch.Tensor:
-    """Linear light [..., H, W, 3] -> sRGB-encoded [0, 1] (clamped first)."""
-    import kornia
-
-    c = x.clamp(0, 1).movedim(-1, -3)                                  # [..., 3, H, W]
-    return kornia.color.linear_rgb_to_rgb(c).clamp(0, 1).movedim(-3, -1)
-
-
-def srgb_to_linear(x: torch.Tensor) -> torch.Tensor:
-    """sRGB-encoded [0, 1] [..., H, W, 3] -> linear light."""
-    import kornia
-
-    return kornia.color.rgb_to_linear_rgb(x.clamp(0, 1).movedim(-1, -3)).movedim(-3, -1)
 
 
 def read_cameras(folder: str | Path) -> dict:
@@ -67,7 +53,7 @@ def load_view_set(folder: str | Path, alpha_is_mask: bool) -> tuple[list[dict], 
             if "A" not in ch:
                 raise ValueError(f"{folder / v['file']}: no A channel (the mask) in a masked view set")
             mask = torch.from_numpy((ch["A"] >= 0.5).astype(np.float32))     # [H, W]
-        views.append(dict(name=v["name"], image=linear_to_srgb(rgb).contiguous(), mask=mask,
+        views.append(dict(name=v["name"], image=linear_to_srgb_torch(rgb).contiguous(), mask=mask,
                           viewmat=torch.tensor(v["viewmat"], dtype=torch.float32).reshape(4, 4), K=K.clone()))
         if "seen" in ch:
             views[-1]["seen"] = torch.from_numpy((ch["seen"] >= 0.5).astype(np.float32))   # [H, W]
@@ -83,7 +69,7 @@ def write_images(folder: str | Path, files: list[str], images_srgb: np.ndarray, 
                  stage: str) -> None:
     """Write ``folder/files[i]`` as EXR: R, G, B linear (from sRGB images [N, H, W, 3]), A = alpha [N, H, W]."""
     folder = Path(folder)
-    linear = srgb_to_linear(torch.from_numpy(np.asarray(images_srgb, np.float32))).numpy()
+    linear = srgb_to_linear_torch(torch.from_numpy(np.asarray(images_srgb, np.float32))).numpy()
     for i, name in enumerate(files):
         path = folder / name
         path.parent.mkdir(parents=True, exist_ok=True)

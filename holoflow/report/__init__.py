@@ -73,8 +73,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--screenshot-height", type=int, default=2400, help="screenshot height, CSS pixels")
     args = p.parse_args(argv)
 
-    from holoflow.pipeline import find_pipeline
-    from holoflow.store import Store
+    from holoflow.flow.pipeline import find_pipeline
+    from holoflow.flow.store import Store
 
     path = find_pipeline(args.pipeline)
     store = Store(args.store or os.environ.get("HOLOFLOW_STORE") or (path.parent / "artifacts"))
@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
 def _stage_order(pipeline_path: Path) -> list[str]:
     """Stage names in topological order, or [] when there is no readable pipeline file (the run's own
     stages are then shown in run.json order)."""
-    from holoflow import pipeline
+    from holoflow.flow import pipeline
 
     try:
         return list(pipeline.load(pipeline_path).stages)

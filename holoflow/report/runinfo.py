@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from holoflow.store import Store, read_json
+from holoflow.flow.store import Store, read_json
 
 
 class ReportError(Exception):

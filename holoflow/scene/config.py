@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from holoflow.params import Engines, StageParams, param
+from holoflow.flow.params import Engines, StageParams, param
 
 
 @dataclass(frozen=True)
@@ -13,8 +13,9 @@ class BasePanoParams(StageParams):
 
     ENGINES = Engines(
         "engine(prompt: str, cfg: BasePanoParams, seed: int, device: str, progress) -> Panorama",
+        weights={"diffusion360": (("model", "diffusion360"),)},
         procedural="holoflow.scene.pano:procedural_pano",
-        diffusion360="holoflow.engines.diffusion360:base_pano_engine")
+        diffusion360="holoflow.networks.diffusion360:base_pano_engine")
 
     width: int = param(1024, "panorama width", "px", ge=1)
     height: int = param(512, "panorama height (width / 2)", "px", ge=1)

@@ -88,7 +88,7 @@ def masked_loss(rgb: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | No
     """(1 - l) L1 + l (1 - SSIM) over supervised pixels. rgb, target [H, W, 3]; mask [H, W] (1 =
     supervise) or None. Unsupervised target pixels are replaced by the (detached) render, so SSIM
     windows that straddle a hole compare nothing invented."""
-    from holoflow.metrics import ssim_map
+    from holoflow.quality.metrics import ssim_map
 
     m = torch.ones_like(rgb[..., :1]) if mask is None else mask.to(rgb).reshape(*rgb.shape[:2], 1)
     target = m * target + (1 - m) * rgb.detach()

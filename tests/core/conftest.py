@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from holoflow.cli import main
+from holoflow.commands import main
 
 FIXTURES = Path(__file__).parent / "fixtures"
 

@@ -4,10 +4,10 @@ from pathlib import Path
 
 import pytest
 
-from holoflow import pipeline
-from holoflow.cachekey import CodeHasher, reasons
-from holoflow.runner import Context, Options
-from holoflow.store import Store
+from holoflow.flow import pipeline
+from holoflow.flow.cachekey import CodeHasher, reasons
+from holoflow.flow.context import Context, Options
+from holoflow.flow.store import Store
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -83,9 +83,9 @@ def _edit(path: Path, extra: str) -> str:
 
 
 @pytest.mark.parametrize("module, stale", [
-    ("holoflow/metrics.py", {"pre_opt", "inp_set", "transfer_opt"}),
+    ("holoflow/quality/metrics.py", {"pre_opt", "inp_set", "transfer_opt"}),
     ("holoflow/stage.py", "all"),
-    ("holoflow/engines/zoedepth.py", {"tangent_depth", "metric_align"}),
+    ("holoflow/networks/zoedepth.py", {"tangent_depth", "metric_align"}),
     ("holoflow/bench/cache.py", set()),
 ])
 def test_editing_an_imported_module_makes_exactly_its_importers_stale(real_tree, module, stale):

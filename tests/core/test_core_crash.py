@@ -116,7 +116,7 @@ def test_killed_template_mid_step(project, capsys):
     project.run_json("p", capsys=capsys)
     proc = project.proc("run", "--set", "upper.mode=title", "--set", "upper.sleep=30")
     step = _wait_for_step(project, proc, "upper")
-    template = [pid for pid, argv, _ in _children(proc.pid) if "holoflow.executors.template" in argv]
+    template = [pid for pid, argv, _ in _children(proc.pid) if "holoflow.flow.executors.template" in argv]
     assert len(template) == 1 and step in [pid for pid, _, _ in _children(template[0])]
     os.kill(template[0], signal.SIGKILL)
     out, err = proc.communicate(timeout=30)

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from holoflow import pipeline, runner
-from holoflow.models import apply_manifest, read_manifest
+from holoflow.flow import context, pipeline
+from holoflow.networks.manifest import apply_manifest, read_manifest
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -45,26 +45,26 @@ def test_profile_device(real):
     ("cuda", None, "tiny", False, "cuda"),        # explicit cuda is left to the steps
 ])
 def test_run_device_precedence(real, monkeypatch, flag, env, profile, cuda, want):
-    monkeypatch.setattr(runner, "cuda_present", lambda: cuda)
+    monkeypatch.setattr(context, "cuda_present", lambda: cuda)
     monkeypatch.delenv("HOLOFLOW_DEVICE", raising=False)
     if env:
         monkeypatch.setenv("HOLOFLOW_DEVICE", env)
-    assert runner.run_device(real, runner.Options(profile=profile, device=flag)) == want
+    assert context.run_device(real, context.Options(profile=profile, device=flag)) == want
 
 
 def test_profile_asking_for_cuda_without_it_is_one_line(real, monkeypatch):
-    monkeypatch.setattr(runner, "cuda_present", lambda: False)
+    monkeypatch.setattr(context, "cuda_present", lambda: False)
     monkeypatch.delenv("HOLOFLOW_DEVICE", raising=False)
     monkeypatch.setitem(real.profile_devices, "paper", "cuda")
     with pytest.raises(pipeline.PipelineError, match="asks for device cuda.*--device cpu") as err:
-        runner.run_device(real, runner.Options(profile="paper"))
+        context.run_device(real, context.Options(profile="paper"))
     assert "\n" not in str(err.value)
 
 
 @pytest.mark.parametrize("device, want", [("cuda", "gsplat"), ("cpu", "cpu")])
 def test_splat_engine_auto(real, device, want):
     r = pipeline.resolve(real, "paper")
-    runner.resolve_device_engines(r, device)
+    context.resolve_device_engines(r, device)
     assert r["pre_opt"].engine == r["transfer_opt"].engine == want
     assert r["inp_set"].engine == "lama"                                 # not a splat engine: untouched
 

@@ -101,7 +101,7 @@ def _one_clear_line(project, capsys, argv, expected):
 
 
 def test_missing_pipeline_file(tmp_path, capsys, monkeypatch):
-    from holoflow.cli import main
+    from holoflow.commands import main
 
     monkeypatch.chdir(tmp_path)
     assert main(["status"]) == 2
@@ -125,7 +125,7 @@ def test_store_path_is_a_file(project, capsys, tmp_path):
 
 
 def test_fixture_pipeline_is_valid():
-    from holoflow import pipeline
+    from holoflow.flow import pipeline
 
     p = pipeline.load(FIXTURES / "pipeline.yaml")
     assert list(p.stages) == ["gen", "upper", "join"]

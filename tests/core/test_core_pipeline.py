@@ -3,8 +3,8 @@ from pathlib import Path
 
 import pytest
 
-from holoflow import pipeline
-from holoflow.cachekey import cache_key, components, reasons, source_digest
+from holoflow.flow import pipeline
+from holoflow.flow.cachekey import cache_key, components, reasons, source_digest
 
 ROOT = Path(__file__).resolve().parents[2]
 FIXTURES = Path(__file__).parent / "fixtures"

@@ -159,7 +159,7 @@ def test_log_command(project, capsys):
 
 def test_warm_templates_are_started_for_every_step_at_the_first_submit(project, capsys, monkeypatch):
     # templates start ahead of their steps so their imports overlap the steps before them
-    from holoflow.executors.local import LocalExecutor
+    from holoflow.flow.executors.local import LocalExecutor
 
     calls = []
     real = LocalExecutor.expect

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from holoflow import pipeline
-from holoflow.cachekey import cache_key, components
-from holoflow.cli import main
-from holoflow.store import Store
+from holoflow.flow import pipeline
+from holoflow.flow.cachekey import cache_key, components
+from holoflow.commands import main
+from holoflow.flow.store import Store
 
 # A stage that proves (or refutes) that it ran at the same time as its peers: it registers in a
 # folder, then either waits for a second registration ("together") or checks none is there ("alone").

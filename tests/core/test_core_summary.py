@@ -1,8 +1,8 @@
-"""One summary printer for run, run --prompts and sweep (holoflow/summary.py)."""
+"""One summary printer for run, run --prompts and sweep (holoflow/flow/summary.py)."""
 from pathlib import Path
 
-from holoflow.store import Store
-from holoflow.summary import summary_lines
+from holoflow.flow.store import Store
+from holoflow.flow.summary import summary_lines
 
 STAGES = {"gen": {"how": "cached", "reasons": []}, "upper": {"how": "ran", "reasons": ["never run"]}}
 

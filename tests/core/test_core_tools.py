@@ -112,7 +112,7 @@ def test_gc_dry_run_then_yes_keeps_latest_and_pinned(project, capsys):
 def test_dag_and_dispatch(project, capsys):
     rc, out, _ = project.cli("dag", "--mermaid", capsys=capsys)
     assert "gen -->|src| upper" in out and out.startswith("flowchart TD")
-    from holoflow.cli import main
+    from holoflow.commands import main
 
     assert main(["bench", "no_such_bench"]) == 2
     assert "holoflow.bench.no_such_bench is not installed" in capsys.readouterr().err

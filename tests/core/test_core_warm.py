@@ -1,4 +1,4 @@
-"""Warm starts (holoflow/executors/warm.py): a forked step behaves as an exec'd one, and a template
+"""Warm starts (holoflow/flow/executors/warm.py): a forked step behaves as an exec'd one, and a template
 survives its children's crashes."""
 import json
 import os
@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from holoflow.executors import step_env
-from holoflow.executors import warm
-from holoflow.executors.warm import Launcher, first_use, preload, supported
+from holoflow.flow.executors import step_env
+from holoflow.flow.executors import warm
+from holoflow.flow.executors.warm import Launcher, first_use, preload, supported
 
 pytestmark = pytest.mark.skipif(not supported(), reason="warm starts need Linux pidfds")
 

@@ -313,8 +313,8 @@ def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room
     """The real engines encode sRGB themselves (DESIGN.md: EXR colour is linear light), so the depth code
     must hand them the *linear* faces: an encode here too would be a double encode. Their progress
     callbacks are called (done, total, what), as holoflow.stage.Job.progress takes them."""
-    from holoflow.engines import depth_anything, zoedepth
-    from holoflow.engines.common import linear_to_srgb
+    from holoflow.networks import depth_anything, zoedepth
+    from holoflow.imageops.color import linear_to_srgb
 
     rgb, r = room_pano
     faces = pd.icosahedron_faces(16, 0.3)
@@ -343,7 +343,7 @@ def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room
                                   progress=progress)
     assert np.allclose(seen["da"], linear, atol=1e-6)
     assert np.allclose(seen["zd"], linear[md.faces], atol=1e-6)
-    assert not np.allclose(seen["da"], linear_to_srgb(linear), atol=0.05)  # an encode would show
+    assert not np.allclose(seen["da"], linear_to_srgb(linear, clip=True), atol=0.05)  # an encode would show
     assert calls == [(0, 20, "images"), (20, 20, "images"), (0, 3, "images"), (3, 3, "images")]
     # the engines' own encode: linear 0.18 is sRGB 0.4614 -> 118 (a second encode would give 179)
     assert depth_anything.to_uint8_srgb(np.full((1, 1, 1, 3), 0.18, np.float32)).ravel().tolist() == [118] * 3
@@ -354,7 +354,7 @@ def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room
 def test_real_engines_dispatch_with_tiny_random_models(tmp_path, room_pano):
     """depth_anything / zoedepth engines through the whole depth path (tiny random local models)."""
     pytest.importorskip("transformers")
-    from holoflow.engines.random_models import save_depth_anything, save_zoedepth
+    from holoflow.networks.random_models import save_depth_anything, save_zoedepth
 
     rgb, r = room_pano
     da = save_depth_anything(tmp_path / "da")

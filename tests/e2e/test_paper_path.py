@@ -64,7 +64,7 @@ def test_paper_tiny_on_cuda_with_gsplat(models, tmp_path):
     pytest.importorskip("gsplat")
     summary = run_paper_tiny(models, tmp_path / "store", "cuda")
     check_summary(summary, "cuda", "gsplat")
-    from holoflow.store import Store
+    from holoflow.flow.store import Store
 
     meta = Store(tmp_path / "store").record(summary["stages"]["transfer_opt"]["key"])["provenance"]["meta"]
     assert meta["backend"] == "gsplat" and meta["gpu_peak_mb"] > 0 and meta["psnr_pano"] is not None

@@ -82,7 +82,7 @@ def test_viewer_draws_the_scene_and_stops_cleanly(two_runs, tmp_path):
         rc = proc.wait(timeout=60)
     assert rc == 0 and "holoflow view: stopped" in log.read_text(), log.read_text()[-2000:]
     assert not [p for p in children if Path(f"/proc/{p}").exists()], "the viewer left processes behind"
-    from holoflow.view import port_free
+    from holoflow.commands.view import port_free
 
     assert port_free("127.0.0.1", int(url.rsplit(":", 1)[1]))
 

@@ -26,7 +26,7 @@ def _one_thread():
 def tiny_sd(tmp_path_factory):
     pytest.importorskip("diffusers")
     pytest.importorskip("transformers")
-    from holoflow.engines.random_models import save_controlnet, save_sd
+    from holoflow.networks.random_models import save_controlnet, save_sd
 
     root = tmp_path_factory.mktemp("sd")
     sd = save_sd(root / "sd")

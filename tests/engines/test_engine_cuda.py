@@ -14,9 +14,9 @@ def _ok(img, shape):
 
 
 def test_diffusion_engines_cuda(tiny_sd, base_image):
-    from holoflow.engines.controlnet_lineart import stylize
-    from holoflow.engines.controlnet_tile import refine
-    from holoflow.engines.diffusion360 import generate_pano
+    from holoflow.networks.controlnet_lineart import stylize
+    from holoflow.networks.controlnet_tile import refine
+    from holoflow.networks.diffusion360 import generate_pano
 
     sd, cnet = tiny_sd
     panos = [generate_pano("a room", 64, 32, steps=2, seed=s, model=str(sd), device="cuda") for s in (0, 1)]
@@ -31,11 +31,11 @@ def test_diffusion_engines_cuda(tiny_sd, base_image):
 
 
 def test_other_engines_cuda(tmp_path, base_image):
-    from holoflow.engines import random_models as rm
-    from holoflow.engines.depth_anything import relative_disparity
-    from holoflow.engines.lama import inpaint
-    from holoflow.engines.realesrgan import upscale
-    from holoflow.engines.zoedepth import metric_depth
+    from holoflow.networks import random_models as rm
+    from holoflow.networks.depth_anything import relative_disparity
+    from holoflow.networks.lama import inpaint
+    from holoflow.networks.realesrgan import upscale
+    from holoflow.networks.zoedepth import metric_depth
 
     _ok(upscale(base_image, 256, 128, model=str(rm.save_rrdbnet(tmp_path / "x4.pth")), device="cuda"), (128, 256, 3))
     faces = np.stack([base_image[:, :32], base_image[:, 32:]])                      # [2, 32, 32, 3]

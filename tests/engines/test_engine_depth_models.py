@@ -15,20 +15,20 @@ def images():
 
 @pytest.fixture(scope="module")
 def tiny_depth_anything(tmp_path_factory):
-    from holoflow.engines.random_models import save_depth_anything
+    from holoflow.networks.random_models import save_depth_anything
 
     return save_depth_anything(tmp_path_factory.mktemp("depth_anything"))
 
 
 @pytest.fixture(scope="module")
 def tiny_zoedepth(tmp_path_factory):
-    from holoflow.engines.random_models import save_zoedepth
+    from holoflow.networks.random_models import save_zoedepth
 
     return save_zoedepth(tmp_path_factory.mktemp("zoedepth"))
 
 
 def test_depth_anything_contract(tiny_depth_anything, images):
-    from holoflow.engines.depth_anything import relative_disparity
+    from holoflow.networks.depth_anything import relative_disparity
 
     calls = []
     disp = relative_disparity(images, model=str(tiny_depth_anything), batch=2,
@@ -39,7 +39,7 @@ def test_depth_anything_contract(tiny_depth_anything, images):
 
 
 def test_zoedepth_contract(tiny_zoedepth, images):
-    from holoflow.engines.zoedepth import metric_depth
+    from holoflow.networks.zoedepth import metric_depth
 
     depth = metric_depth(images, model=str(tiny_zoedepth))
     assert depth.shape == (3, 24, 40) and depth.dtype == np.float32
@@ -51,7 +51,7 @@ def test_zoedepth_padding_removal():
     """The crop undoes ZoeDepth's reflect padding: a ramp over the padded canvas keeps its centre."""
     import torch
 
-    from holoflow.engines.zoedepth import remove_padding
+    from holoflow.networks.zoedepth import remove_padding
 
     h, w = 24, 40
     ph, pw = int(np.sqrt(h / 2) * 3), int(np.sqrt(w / 2) * 3)
@@ -62,9 +62,9 @@ def test_zoedepth_padding_removal():
 
 
 def test_missing_depth_weights(tmp_path, images):
-    from holoflow.engines.depth_anything import relative_disparity
-    from holoflow.engines.weights import MissingWeights
-    from holoflow.engines.zoedepth import metric_depth
+    from holoflow.networks.depth_anything import relative_disparity
+    from holoflow.networks.weights import MissingWeights
+    from holoflow.networks.zoedepth import metric_depth
 
     with pytest.raises(MissingWeights, match="tangent_depth.model"):
         relative_disparity(images, model=str(tmp_path / "none"))

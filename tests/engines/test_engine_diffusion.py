@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from engine_checks import seam_is_typical
-from holoflow.engines.circular import blend_overlap, decode_periodic, extend_periodic, overlap_columns
+from holoflow.networks.circular import blend_overlap, decode_periodic, extend_periodic, overlap_columns
 
 pytestmark = pytest.mark.models
 pytest.importorskip("diffusers")
@@ -56,7 +56,7 @@ def _check_pano(img, h=32, w=64):
 
 
 def test_generate_pano(tiny_sd):
-    from holoflow.engines.diffusion360 import generate_pano
+    from holoflow.networks.diffusion360 import generate_pano
 
     steps = []
     a = generate_pano("a wooden cabin", 64, 32, steps=2, seed=0, model=str(tiny_sd[0]),
@@ -70,13 +70,13 @@ def test_generate_pano(tiny_sd):
 
 
 def test_generate_pano_odd_size_is_resized(tiny_sd):
-    from holoflow.engines.diffusion360 import generate_pano
+    from holoflow.networks.diffusion360 import generate_pano
 
     _check_pano(generate_pano("a beach", 60, 30, steps=1, seed=0, model=str(tiny_sd[0])), 30, 60)
 
 
 def test_stylize(tiny_sd, base_image):
-    from holoflow.engines.controlnet_lineart import stylize
+    from holoflow.networks.controlnet_lineart import stylize
 
     sd, cnet = tiny_sd
     line = np.zeros(base_image.shape[:2], np.float32)
@@ -94,7 +94,7 @@ def test_stylize(tiny_sd, base_image):
 
 
 def test_refine(tiny_sd, base_image):
-    from holoflow.engines.controlnet_tile import refine, tile_grid
+    from holoflow.networks.controlnet_tile import refine, tile_grid
 
     xs, ys, tw, th = tile_grid(64, 32, 32, 8)
     assert len(xs) >= 2 and xs[0] == 0 and xs[-1] + tw > 64   # a tile runs across the seam
@@ -117,9 +117,9 @@ def test_refine(tiny_sd, base_image):
 
 
 def test_missing_diffusion_weights(tmp_path, base_image):
-    from holoflow.engines.controlnet_lineart import stylize
-    from holoflow.engines.diffusion360 import generate_pano
-    from holoflow.engines.weights import MissingWeights
+    from holoflow.networks.controlnet_lineart import stylize
+    from holoflow.networks.diffusion360 import generate_pano
+    from holoflow.networks.weights import MissingWeights
 
     with pytest.raises(MissingWeights, match="base_pano.model"):
         generate_pano("x", 64, 32, model=str(tmp_path / "none"))

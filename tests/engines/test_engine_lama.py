@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from holoflow.engines.lama import inpaint, lama_class, lama_from_state_dict
-from holoflow.engines.weights import MissingWeights
+from holoflow.networks.lama import inpaint, lama_class, lama_from_state_dict
+from holoflow.networks.weights import MissingWeights
 
 pytestmark = pytest.mark.models
 pytest.importorskip("safetensors")
@@ -12,7 +12,7 @@ pytest.importorskip("safetensors")
 @pytest.fixture(scope="module")
 def tiny_lama(tmp_path_factory):
     """Saved as the released Lightning checkpoint's generator part ("generator." keys)."""
-    from holoflow.engines.random_models import save_lama
+    from holoflow.networks.random_models import save_lama
 
     return save_lama(tmp_path_factory.mktemp("lama") / "big-lama-tiny.safetensors")
 
@@ -27,7 +27,7 @@ def test_release_key_layout():
 
 
 def test_shape_read_from_weights(tiny_lama):
-    from holoflow.engines.weights import load_state_dict
+    from holoflow.networks.weights import load_state_dict
 
     state = load_state_dict(tiny_lama)
     state["discriminator.model.0.weight"] = state["generator.model.1.ffc.convl2l.weight"]   # ignored

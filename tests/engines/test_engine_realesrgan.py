@@ -4,8 +4,8 @@ import pytest
 import torch
 
 from engine_checks import seam_is_typical
-from holoflow.engines.realesrgan import rrdbnet_class, rrdbnet_from_state_dict, upscale, upscale_srgb
-from holoflow.engines.weights import MissingWeights
+from holoflow.networks.realesrgan import rrdbnet_class, rrdbnet_from_state_dict, upscale, upscale_srgb
+from holoflow.networks.weights import MissingWeights
 
 pytestmark = pytest.mark.models
 pytest.importorskip("safetensors")
@@ -36,7 +36,7 @@ def test_official_key_names():
 @pytest.mark.parametrize("scale,fmt", [(2, "pth"), (4, "safetensors")])
 def test_architecture_read_from_weights(tmp_path, scale, fmt):
     path = _save(tmp_path, scale, fmt)
-    from holoflow.engines.weights import load_state_dict
+    from holoflow.networks.weights import load_state_dict
 
     net = rrdbnet_from_state_dict(load_state_dict(path))
     assert net.scale == scale and len(net.body) == 1
@@ -57,7 +57,7 @@ def test_upscale_contract(tmp_path, base_image, scale, fmt, size):
 
 def test_wrap_padding_makes_the_seam_an_ordinary_column(tmp_path, base_image):
     """Rolling the input in longitude rolls the network output: the seam is treated like any column."""
-    from holoflow.engines.weights import load_state_dict
+    from holoflow.networks.weights import load_state_dict
 
     net = rrdbnet_from_state_dict(load_state_dict(_save(tmp_path, 2, "pth")))
     img = torch.rand(1, 3, 16, 32, generator=torch.Generator().manual_seed(0))

@@ -2,8 +2,8 @@
 import pytest
 import torch
 
-from holoflow.engines import weights
-from holoflow.engines.weights import MissingWeights, load_state_dict, resolve, weight_file
+from holoflow.networks import weights
+from holoflow.networks.weights import MissingWeights, load_state_dict, resolve, weight_file
 
 pytestmark = pytest.mark.models
 pytest.importorskip("huggingface_hub")

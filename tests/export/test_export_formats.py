@@ -19,7 +19,7 @@ from holoflow.export.gltf import gaussians_glb_bytes, mesh_glb_bytes
 from holoflow.export.mesh import rgbd_mesh
 from holoflow.export.splats import (SH_C0, SH_FLIP, SPLAT_DTYPE, Y_UP, activate, compressed_ply_bytes,
                                     splat_bytes, spz_bytes)
-from holoflow.params import ParamError
+from holoflow.flow.params import ParamError
 from holoflow.splat.project import eval_sh, quat_to_rotmat
 
 gsply = pytest.importorskip("gsply")

@@ -1,4 +1,4 @@
-"""NIQE / BRISQUE (holoflow.nriqa): the packages' reference values, and scores that get worse with
+"""NIQE / BRISQUE (holoflow.quality.nriqa): the packages' reference values, and scores that get worse with
 Gaussian blur, noise and JPEG strength on perspective crops of real panoramas and on procedural views.
 
 Images are 512 x 512 (the paper's view size): NIQE's pristine model compares 96 px patches, and at
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import torch
 
-from holoflow import nriqa
+from holoflow.quality import nriqa
 
 PHOTOS = Path(os.environ.get("HOLOFLOW_PHOTOS", "/work/shared/data/photos"))
 SIZE = 512
@@ -71,13 +71,13 @@ def photo_crops() -> dict:
 
 @pytest.fixture(scope="module")
 def procedural_views() -> dict:
-    from holoflow.recon.views import linear_to_srgb
+    from holoflow.imageops.color import linear_to_srgb_torch
     from holoflow.scene import render_pinhole, scene_from_prompt
 
     out = {}
     for prompt in ("a modern living room with a sofa and a lamp", "a stone courtyard with a fountain"):
         rgb = render_pinhole(scene_from_prompt(prompt, 0), _K().numpy(), _viewmat(0.7, -0.1).numpy(), SIZE, SIZE)[0]
-        out[prompt] = linear_to_srgb(torch.from_numpy(rgb)).double().numpy()
+        out[prompt] = linear_to_srgb_torch(torch.from_numpy(rgb)).double().numpy()
     return out
 
 

@@ -1,4 +1,4 @@
-"""Typed stage parameters (holoflow/params.py): one source of truth, checked overrides with one-line
+"""Typed stage parameters (holoflow/flow/params.py): one source of truth, checked overrides with one-line
 errors, engine registries checked against pipeline.yaml, and nothing heavy on the CLI's path."""
 import dataclasses
 import json
@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from holoflow import pipeline
-from holoflow.params import ParamError
+from holoflow.flow import pipeline
+from holoflow.flow.params import ParamError
 from holoflow.recon.config import PreOptParams, TransferOptParams
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -111,7 +111,7 @@ def test_every_registered_engine_resolves_to_a_callable():
 
 
 def test_param_classes_and_the_params_command_import_no_heavy_library():
-    code = ("import sys, holoflow.cli as c; c.main(['params', 'pre_opt']); "
+    code = ("import sys, holoflow.commands as c; c.main(['params', 'pre_opt']); "
             "bad = [m for m in ('torch', 'numpy', 'cv2', 'scipy') if m in sys.modules]; "
             "print('HEAVY', bad)")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)

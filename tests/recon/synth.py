@@ -19,7 +19,7 @@ import torch
 from holoflow.geometry.camera import intrinsics_from_fov, look_at
 from holoflow.io.exr import write_rgb
 from holoflow.io.ply import write_points
-from holoflow.recon.views import srgb_to_linear
+from holoflow.imageops.color import srgb_to_linear_torch
 from holoflow.splat.model import GaussianModel
 from holoflow.splat.rasterize import render
 from holoflow.splat.project import SH_C0
@@ -114,7 +114,7 @@ def _cameras_json(viewmats: torch.Tensor, size: int, kind: str, names: list[str]
 
 
 def _write_set(folder: Path, cams: dict, rgb_srgb: torch.Tensor, alpha: np.ndarray | None) -> None:
-    lin = srgb_to_linear(rgb_srgb).numpy()
+    lin = srgb_to_linear_torch(rgb_srgb).numpy()
     for i, v in enumerate(cams["views"]):
         p = folder / v["file"]
         p.parent.mkdir(parents=True, exist_ok=True)

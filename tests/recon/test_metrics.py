@@ -1,10 +1,10 @@
-"""holoflow.metrics against known values."""
+"""holoflow.quality.metrics against known values."""
 import math
 
 import pytest
 import torch
 
-from holoflow import metrics
+from holoflow.quality import metrics
 
 
 def test_psnr_identical_is_inf():

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import synth
-from holoflow import metrics
+from holoflow.quality import metrics
 from holoflow.io.exr import read_exr
 from holoflow.io.ply import read_points
 from holoflow.recon.schedule import panorama_extent, render_views
@@ -188,7 +188,7 @@ def test_bad_param_is_one_line_error(tmp_path):
 def test_inp_set_lama_engine_through_the_stage(chain, tmp_path):
     """The lama engine's real loading path, with a tiny random big-lama-shaped generator."""
     pytest.importorskip("safetensors")
-    from holoflow.engines.random_models import save_lama
+    from holoflow.networks.random_models import save_lama
 
     weights = save_lama(tmp_path / "big-lama-tiny.safetensors")
     out, log = run_stage(tmp_path, "inp_set", "lama", {"alpha_threshold": 0.5, "method": "telea", "radius": 3,

@@ -17,7 +17,7 @@ import pytest
 
 from holoflow.report import chromium, clouds, main
 from holoflow.report.runinfo import ReportError, collect
-from holoflow.store import Store
+from holoflow.flow.store import Store
 
 ROOT = Path(__file__).resolve().parents[2]
 PIPELINE = ROOT / "pipeline.yaml"

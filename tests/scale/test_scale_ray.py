@@ -10,9 +10,9 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from holoflow.cli import main                                    # noqa: E402
-from holoflow.executors import StepTask                          # noqa: E402
-from holoflow.store import Store                                 # noqa: E402
+from holoflow.commands import main                                    # noqa: E402
+from holoflow.flow.executors import StepTask                          # noqa: E402
+from holoflow.flow.store import Store                                 # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -92,7 +92,7 @@ stages:
 
 
 def test_same_key_committed_by_several_workers(cluster, tmp_path):
-    from holoflow.executors.ray_executor import _ray_step
+    from holoflow.flow.executors.ray_executor import _ray_step
 
     (tmp_path / "twice.py").write_text("from holoflow.stage import Job\nJob.from_argv().output('o.bin')"
                                       ".write_bytes(bytes(range(256)) * 4096)\n")

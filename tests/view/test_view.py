@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from holoflow import view
+from holoflow.commands import view
 from holoflow.io.ply import write_gaussians, write_points
 
 

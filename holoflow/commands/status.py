@@ -1,0 +1,30 @@
+"""`holoflow status [PROMPT]`: fresh / stale / missing per stage, and why (holoflow/flow/status.py)."""
+from __future__ import annotations
+
+import json
+
+from holoflow.commands.options import common, load, options, parser
+
+
+def main(argv: list[str]) -> int:
+    p = parser("status")
+    p.add_argument("prompt", nargs="?", help="text prompt (default: the last run's prompt)")
+    common(p)
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args(argv)
+    from holoflow.flow.context import Context
+    from holoflow.flow.status import describe_ran, engine_note, status
+
+    pipe, store = load(args)
+    ctx = Context.build(pipe, store, options(args))
+    st = status(ctx)
+    if args.json:
+        print(json.dumps({"prompt": ctx.prompt, "profile": ctx.profile, "stages": st}, indent=1))
+        return 0
+    width = max(len(n) for n in st)
+    for name, s in st.items():
+        why = "; ".join(s["reasons"]) or describe_ran(s.get("ran"))
+        if s.get("engine"):
+            why = f"{engine_note({'engine': s['engine']['ran'], 'why': s['engine']['why']})}; {why}"
+        print(f"{name:<{width}}  {s['state']:<7}  {why}".rstrip())
+    return 0

@@ -1,0 +1,114 @@
+"""Your own files as a stage's outputs (`holoflow run --use STAGE=PATH`): checked, imported into the
+store (an image panorama decoded to the stage's linear EXR), and remembered so `status` sees the same
+digests without decoding again."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .pipeline import PipelineError
+
+if TYPE_CHECKING:
+    from .context import Context
+
+
+def dropped_uses(ctx: Context) -> dict[str, str]:
+    """Stages the latest run took from a user's file (``--use``) that ``ctx`` does not: stage -> source."""
+    latest = ctx.store.run_info(ctx.store.latest_run_id()) or {}
+    return {name: str(s.get("source")) for name, s in latest.get("stages", {}).items()
+            if s.get("how") == "used" and name not in ctx.uses}
+
+
+def import_use(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
+    """Validate the user's file(s) for ``stage`` and hash them into the store; returns the output map."""
+    s = ctx.pipe.stages[stage]
+    if src.is_dir():
+        files = {p.relative_to(src).as_posix(): p for p in sorted(src.rglob("*")) if p.is_file()}
+        if not files:
+            raise PipelineError(f"--use {stage}={src}: the folder is empty; fix: point at the stage's files")
+    elif s.primary and s.primary.endswith(".exr") and src.suffix.lower() in IMAGE_EXTS:
+        return _import_image(ctx, stage, src)
+    else:
+        name = s.primary or src.name
+        if s.primary and Path(s.primary).suffix.lower() != src.suffix.lower():
+            raise PipelineError(f"--use {stage}={src}: {stage}'s main output is {s.primary}, got a "
+                                f"{src.suffix or 'suffix-less'} file; fix: convert it (e.g. oiiotool IN -o "
+                                f"OUT{Path(s.primary).suffix})")
+        files = {name: src}
+    for rel, p in files.items():
+        _validate_file(stage, p)
+    outputs = {}
+    for rel, p in files.items():
+        tmp = ctx.store.staging(f"use-{stage}") / "f"
+        shutil.copyfile(p, tmp)
+        outputs[rel] = ctx.store.put(tmp)
+        tmp.parent.rmdir()
+    return outputs
+
+
+IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".hdr")  # holoflow.io.image.IMAGE_EXTS less .exr
+
+
+def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
+    """A photo / image panorama for an EXR stage: decoded to linear RGB (holoflow.io.image), written as
+    the stage's primary EXR; the facts (file, digest, colour handling, GPano) go to the run record."""
+    from holoflow.io.exr import write_rgb
+    from holoflow.io.image import ImageImportError, read_panorama_image
+
+    try:
+        rgb, facts = read_panorama_image(src)
+    except ImageImportError as e:
+        raise PipelineError(f"--use {stage}: {e}") from None
+    tmp = ctx.store.staging(f"use-{stage}") / "f.exr"
+    write_rgb(tmp, rgb, {"holoflow.source": facts["file"], "holoflow.source_sha256": facts["sha256"],
+                         "holoflow.source_colour": facts["colour"]})
+    out = {ctx.pipe.stages[stage].primary: ctx.store.put(tmp)}
+    tmp.parent.rmdir()
+    ctx.imports[stage] = facts
+    import_cache(ctx, facts["sha256"], out)
+    return out
+
+
+def import_cache(ctx: Context, source_sha: str, outputs: dict | None = None) -> dict | None:
+    """Remember (or look up) the outputs an image file imported to, by the file's sha256, so that
+    ``status`` sees the same input digests as the run without decoding the image again."""
+    path = ctx.store.root / "cache" / "imports.json"
+    try:
+        table = json.loads(path.read_text())
+    except (OSError, ValueError):
+        table = {}
+    if outputs is None:
+        return table.get(source_sha)
+    table[source_sha] = outputs
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(table, sort_keys=True))
+    os.replace(tmp, path)
+    return outputs
+
+
+def _validate_file(stage: str, p: Path) -> None:
+    ext = p.suffix.lower()
+    if ext == ".exr":
+        from holoflow.io.exr import ExrError, read_exr
+
+        try:
+            read_exr(p)
+        except ExrError as e:
+            raise PipelineError(f"--use {stage}: {p} does not open as EXR ({e}); fix: pass an OpenEXR "
+                                f"file (e.g. oiiotool IN -o OUT.exr)") from None
+    elif ext == ".ply":
+        from plyfile import PlyData
+
+        try:
+            with open(p, "rb") as f:
+                PlyData.read(f)
+        except Exception as e:  # plyfile raises several types for a broken file
+            raise PipelineError(f"--use {stage}: {p} does not open as PLY ({type(e).__name__}: {e}); fix: "
+                                f"pass a valid PLY file") from None
+
+
+# -- planning ------------------------------------------------------------------------------------
