@@ -128,8 +128,8 @@ class StageParams:
         hint = _hints(cls)[name]
         ok, out = _coerce(hint, value)
         if not ok:
-            raise ParamError(f"{name}={value!r} is {_kind(value)}, expected {_type_name(hint)}",
-                             f"give {name} {_article(hint)} value")
+            raise ParamError(f"{name}={value!r} is {kind(value)}, expected {_type_name(hint)}",
+                             f"give {name} {article(hint)} value")
         meta = f.metadata
         if meta["choices"] and out not in meta["choices"]:
             raise ParamError(f"{name}={value!r} is not one of {', '.join(meta['choices'])}",
@@ -169,17 +169,43 @@ def _hints(cls: type) -> dict[str, Any]:
 
 
 def suggest(word: str, choices) -> str:
+    """' (did you mean 'X'?)' for the closest of ``choices`` to ``word``, else ''."""
     import difflib
 
     close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1)
     return f" (did you mean '{close[0]}'?)" if close else ""
 
 
+def coerce_like(default: Any, value: Any) -> tuple[bool, Any]:
+    """(whether ``value`` has the type of a plain ``default``, the value in that type) for a stage's
+    params without a class (pipeline.yaml ``params:``): a float default takes an int (as a float), a
+    list default of one element type checks each element, None takes anything."""
+    if default is None:
+        return True, value
+    if isinstance(default, (bool, int, float, str)):
+        return _coerce(type(default), value)
+    if isinstance(default, list):
+        if not isinstance(value, list):
+            return False, value
+        if default and len({type(d) for d in default}) == 1:
+            pairs = [coerce_like(default[0], v) for v in value]
+            return all(ok for ok, _ in pairs), [v for _, v in pairs]
+        return True, value
+    if isinstance(default, dict):
+        return isinstance(value, dict), value
+    return type(value) is type(default), value
+
+
+def is_int(v: Any) -> bool:
+    """An int that is not a bool."""
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
 def _coerce(hint: Any, value: Any) -> tuple[bool, Any]:
     if hint is bool:
         return isinstance(value, bool), value
     if hint is int:
-        return isinstance(value, int) and not isinstance(value, bool), value
+        return is_int(value), value
     if hint is float:
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         return ok, float(value) if ok else value
@@ -215,12 +241,14 @@ def _type_name(hint: Any) -> str:
     return hint.__name__
 
 
-def _article(hint: Any) -> str:
-    return {bool: "a true/false", int: "an integer", float: "a numeric", str: "a string"}.get(
-        hint, f"a {_type_name(hint)}")
+def article(hint: Any) -> str:
+    """What a value of type ``hint`` is called after "give NAME ...": "an integer", "a true/false"."""
+    return {bool: "a true/false", int: "an integer", float: "a numeric", str: "a string", list: "a list",
+            dict: "a mapping"}.get(hint, f"a {_type_name(hint)}")
 
 
-def _kind(v: Any) -> str:
+def kind(v: Any) -> str:
+    """What ``v`` is, in words ("an integer", "a mapping", "empty"), for error messages."""
     return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list",
             tuple: "a list", dict: "a mapping", type(None): "empty"}.get(type(v), type(v).__name__)
 

@@ -36,6 +36,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .params import ParamError, article, coerce_like, is_int, kind, load_class, suggest
+
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _TOP_KEYS = {"version", "seed", "default_profile", "stages", "profiles"}
 _STAGE_KEYS = {"run", "engine", "engines", "prompt", "inputs", "code", "primary", "config", "params",
@@ -206,18 +208,18 @@ def _parse(path: Path) -> Any:
 
 def _validate(path: Path, doc: Any) -> Pipeline:
     if not isinstance(doc, dict):
-        raise _err(path, None, f"top level is {_kind(doc)}, not a mapping",
+        raise _err(path, None, f"top level is {kind(doc)}, not a mapping",
                    "start with `version: 1` and a `stages:` mapping")
     for key in doc:
         if key not in _TOP_KEYS:
             raise _err(path, None, f"unknown top-level key '{key}'",
-                       f"use only {', '.join(sorted(_TOP_KEYS))}{_suggest(key, _TOP_KEYS)}")
+                       f"use only {', '.join(sorted(_TOP_KEYS))}{suggest(key, _TOP_KEYS)}")
     version = doc.get("version")
     if version not in SUPPORTED_VERSIONS:
         raise _err(path, None, f"version is {version!r}", "set `version: 1`")
     seed = doc.get("seed", 0)
-    if not _is_int(seed):
-        raise _err(path, None, f"seed is {seed!r} ({_kind(seed)})", "set `seed:` to an integer")
+    if not is_int(seed):
+        raise _err(path, None, f"seed is {seed!r} ({kind(seed)})", "set `seed:` to an integer")
     raw_stages = doc.get("stages")
     if not isinstance(raw_stages, dict) or not raw_stages:
         raise _err(path, None, "no `stages:` mapping", "add `stages:` with at least one stage")
@@ -228,7 +230,7 @@ def _validate(path: Path, doc: Any) -> Pipeline:
         for inp, up in s.inputs.items():
             if up not in stages:
                 raise _err(path, s.name, f"input '{inp}' names unknown stage '{up}'",
-                           f"name one of: {', '.join(stages)}{_suggest(up, stages)}")
+                           f"name one of: {', '.join(stages)}{suggest(up, stages)}")
             if up == s.name:
                 raise _err(path, s.name, f"input '{inp}' names the stage itself",
                            "a stage cannot read its own outputs; name an upstream stage")
@@ -245,12 +247,12 @@ def _stage(path: Path, name: Any, block: Any) -> Stage:
     if not isinstance(name, str) or not _NAME.match(name):
         raise _err(path, str(name), "invalid stage name", "use letters, digits and _ (not first digit)")
     if not isinstance(block, dict):
-        raise _err(path, name, f"block is {_kind(block)}, not a mapping",
+        raise _err(path, name, f"block is {kind(block)}, not a mapping",
                    "give it `run:`, `engine:` and `params:` keys")
     for key in block:
         if key not in _STAGE_KEYS:
             raise _err(path, name, f"unknown key '{key}'",
-                       f"use only {', '.join(sorted(_STAGE_KEYS))}{_suggest(key, _STAGE_KEYS)}")
+                       f"use only {', '.join(sorted(_STAGE_KEYS))}{suggest(key, _STAGE_KEYS)}")
     run = block.get("run")
     if not isinstance(run, str) or not run.strip():
         raise _err(path, name, "missing `run:`", "set `run:` to the stage program, e.g. stages/NAME.py")
@@ -281,7 +283,7 @@ def _stage(path: Path, name: Any, block: Any) -> Stage:
         raise _err(path, name, "`code:` is not a list of paths", "write e.g. `code: [holoflow/io]`")
     params = block.get("params", {}) or {}
     if not isinstance(params, dict):
-        raise _err(path, name, f"`params:` is {_kind(params)}, not a mapping", "write `params: {key: value}`")
+        raise _err(path, name, f"`params:` is {kind(params)}, not a mapping", "write `params: {key: value}`")
     for p in params:
         if not isinstance(p, str) or not _NAME.match(p) or p == "engine":
             raise _err(path, name, f"invalid param name {p!r}",
@@ -291,7 +293,7 @@ def _stage(path: Path, name: Any, block: Any) -> Stage:
         for e in engines:
             if e not in config.ENGINES.names:
                 raise _err(path, name, f"engine '{e}' is not registered for {config.__name__}",
-                           f"use one of: {', '.join(config.ENGINES.names)}{_suggest(e, config.ENGINES.names)}")
+                           f"use one of: {', '.join(config.ENGINES.names)}{suggest(e, config.ENGINES.names)}")
         params = {**config.defaults(), **{k: _param_checked(path, name, config, k, v, "`params:`")
                                           for k, v in params.items()}}
     primary = block.get("primary")
@@ -306,8 +308,6 @@ def _config_class(path: Path, stage: str, spec: Any):
     """The StageParams class of ``config: module:Class`` (None when the key is absent)."""
     if spec is None:
         return None
-    from .params import load_class
-
     if not isinstance(spec, str) or ":" not in spec:
         raise _err(path, stage, f"`config:` is {spec!r}", "write `config: package.module:ClassName`")
     try:
@@ -319,8 +319,6 @@ def _config_class(path: Path, stage: str, spec: Any):
 
 def _param_checked(path: Path, stage: str, config, key: str, value: Any, origin: str) -> Any:
     """``value`` checked by the stage's param class (type, range, known name), canonical type."""
-    from .params import ParamError
-
     try:
         value = config.check(key, value)
     except ParamError as e:
@@ -333,14 +331,14 @@ def _resources(path: Path, stage: str, raw: Any, base: Resources, origin: str) -
     if raw is None:
         return base
     if not isinstance(raw, dict):
-        raise _err(path, stage, f"{origin} is {_kind(raw)}, not a mapping",
+        raise _err(path, stage, f"{origin} is {kind(raw)}, not a mapping",
                    "write e.g. `resources: {cpus: 1, gpus: 0, memory_gb: 2}`")
     over = {}
     for key, value in raw.items():
         if key not in _RESOURCE_KEYS:
             raise _err(path, stage, f"{origin} has unknown key '{key}'",
-                       f"use only {', '.join(_RESOURCE_KEYS)}{_suggest(str(key), _RESOURCE_KEYS)}")
-        ok = (_is_int(value) if _RESOURCE_KEYS[key] is int
+                       f"use only {', '.join(_RESOURCE_KEYS)}{suggest(str(key), _RESOURCE_KEYS)}")
+        ok = (is_int(value) if _RESOURCE_KEYS[key] is int
               else isinstance(value, (int, float)) and not isinstance(value, bool) and value == value)
         low = 1 if key == "cpus" else 0
         if not ok or value < low or value == float("inf"):
@@ -422,7 +420,7 @@ def _profiles(path: Path, raw: Any, stages: dict[str, Stage]
         for sname, over in block.items():
             if sname not in stages:
                 raise _err(path, None, f"profile '{pname}' names unknown stage '{sname}'",
-                           f"use one of: {', '.join(stages)}{_suggest(sname, stages)}")
+                           f"use one of: {', '.join(stages)}{suggest(sname, stages)}")
             over = over or {}
             if not isinstance(over, dict):
                 raise _err(path, sname, f"profile '{pname}' overrides are not a mapping",
@@ -442,45 +440,19 @@ def _check_override(path: Path, stage: Stage, key: str, value: Any, origin: str)
     if key == "engine":
         if value not in stage.engines:
             raise _err(path, stage.name, f"{origin} sets engine '{value}', not one of {list(stage.engines)}",
-                       f"pick one of {', '.join(stage.engines)}{_suggest(str(value), stage.engines)}")
+                       f"pick one of {', '.join(stage.engines)}{suggest(str(value), stage.engines)}")
         return value
     if stage.config is not None:
         return _param_checked(path, stage.name, stage.config, key, value, origin)
     if key not in stage.params:
         raise _err(path, stage.name, f"{origin} sets unknown param '{key}'",
-                   f"params are: {', '.join(stage.params) or '(none)'}{_suggest(key, stage.params)}")
-    ok, coerced = _typed(stage.params[key], value)
+                   f"params are: {', '.join(stage.params) or '(none)'}{suggest(key, stage.params)}")
+    ok, coerced = coerce_like(stage.params[key], value)
     if not ok:
-        raise _err(path, stage.name, f"{origin} sets {key}={value!r} ({_kind(value)}), but the default "
-                   f"{stage.params[key]!r} is {_kind(stage.params[key])}",
-                   f"give {key} {_article(stage.params[key])} value")
+        raise _err(path, stage.name, f"{origin} sets {key}={value!r} ({kind(value)}), but the default "
+                   f"{stage.params[key]!r} is {kind(stage.params[key])}",
+                   f"give {key} {article(type(stage.params[key]))} value")
     return coerced
-
-
-def _typed(default: Any, value: Any) -> tuple[bool, Any]:
-    if default is None:
-        return True, value
-    if isinstance(default, bool):
-        return isinstance(value, bool), value
-    if isinstance(default, int):
-        return _is_int(value), value
-    if isinstance(default, float):
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return True, float(value)
-        return False, value
-    if isinstance(default, str):
-        return isinstance(value, str), value
-    if isinstance(default, list):
-        if not isinstance(value, list):
-            return False, value
-        kinds = {type(d) for d in default}
-        if len(kinds) == 1 and default:
-            pairs = [_typed(default[0], v) for v in value]
-            return all(ok for ok, _ in pairs), [v for _, v in pairs]
-        return True, value
-    if isinstance(default, dict):
-        return isinstance(value, dict), value
-    return type(value) is type(default), value
 
 
 def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[str, ...] = ()
@@ -506,7 +478,7 @@ def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[
         sname, key = lhs.split(".", 1)
         if sname not in out:
             raise PipelineError(f"--set {item!r}: unknown stage '{sname}'; fix: use one of: "
-                                f"{', '.join(out)}{_suggest(sname, out)}")
+                                f"{', '.join(out)}{suggest(sname, out)}")
         import yaml
 
         try:
@@ -529,7 +501,7 @@ def profile_list(pipe: Pipeline, profile: str | None) -> list[str]:
     for name in names:
         if name not in pipe.profiles:
             raise PipelineError(f"{pipe.path.name}: unknown profile '{name}'; fix: use one of: "
-                                f"{', '.join(pipe.profiles) or '(none defined)'}{_suggest(name, pipe.profiles)}")
+                                f"{', '.join(pipe.profiles) or '(none defined)'}{suggest(name, pipe.profiles)}")
     return names
 
 
@@ -547,24 +519,3 @@ def _apply(r: Resolved, key: str, value: Any, origin: str) -> None:
     else:
         r.params[key] = value
     r.overrides[key] = origin
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _kind(v: Any) -> str:
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list",
-            dict: "a mapping", type(None): "empty"}.get(type(v), type(v).__name__)
-
-
-def _article(v: Any) -> str:
-    return {bool: "true/false", int: "an integer", float: "a numeric", str: "a string", list: "a list",
-            dict: "a mapping"}.get(type(v), "a matching")
-
-
-def _suggest(word: str, choices) -> str:
-    import difflib
-
-    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1)
-    return f" (did you mean '{close[0]}'?)" if close else ""

@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -34,10 +35,45 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
     ``on_line`` gets each output line (progress, meta, log); ``started`` the process once it runs (it
     has ``pid`` and ``kill()``); ``aborted()`` true means the run was stopped: nothing is committed and
     no failed log is kept. With a ``launcher`` (holoflow.flow.executors.warm) a Python program is forked
-    from a warm template instead of exec'd.
+    from a warm template instead of exec'd. Three steps: launch, validate the outputs, commit.
     """
     store = Store(task.store)
     staging = store.staging(task.stage)
+    run = _launch(task, staging, on_line, started, launcher)
+    host = platform.node()
+    if aborted and aborted():
+        remove_tree(staging)
+        return {"ok": False, "aborted": True, "host": host, "reason": "stopped"}
+    files, failure = _validate(run)
+    if failure is not None:
+        kept = _keep_failed_log(store, task, run.log_path)
+        remove_tree(staging)
+        return {"ok": False, "host": host, **failure, "log": str(kept), "tail": _tail(kept, LOG_TAIL)}
+    rec = store.write_record(_record(store, task, run, files, executor, host), replace=task.replace)  # first wins
+    remove_tree(staging)
+    return {"ok": True, "record": rec, "host": host}
+
+
+@dataclass
+class _Launched:
+    """A finished step process: its output folder and log, exit code, resource use, @meta lines."""
+
+    out_dir: Path
+    log_path: Path
+    argv0: str
+    warm: bool
+    code: int
+    usage: Any                      # os.wait4's resource use
+    meta: dict[str, Any]
+    t_start: float                  # time.time() at the launch
+    wall: float                     # seconds
+    lost: bool                      # its warm template died under it
+
+
+def _launch(task: StepTask, staging: Path, on_line, started, launcher) -> _Launched:
+    """Write the job spec into ``staging``, start the program (exec'd, or forked from ``launcher``'s warm
+    template), stream its output to the log and ``on_line``, and wait for it. A failure to start or
+    an interruption removes ``staging`` and raises."""
     out_dir, work_dir = staging / "out", staging / "work"
     out_dir.mkdir()
     work_dir.mkdir()
@@ -81,48 +117,48 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
             raise
         finally:
             proc.stdout.close()
-    wall = time.monotonic() - t0
-    host = platform.node()
-    if aborted and aborted():
-        remove_tree(staging)
-        return {"ok": False, "aborted": True, "host": host, "reason": "stopped"}
-    if code != 0:
-        kept = _keep_failed_log(store, task, log_path)
-        remove_tree(staging)
-        reason = f"killed by signal {-code}" if code < 0 else f"exit code {code}"
-        if getattr(proc, "lost", False):
-            reason += " (its warm template died)"
-        return {"ok": False, "host": host, "reason": reason, "log": str(kept), "tail": _tail(kept, LOG_TAIL)}
-    files = sorted(p for p in out_dir.rglob("*") if not p.is_dir())
+    return _Launched(out_dir, log_path, Path(argv[0]).name, warm, code, usage, meta, t_start,
+                     time.monotonic() - t0, getattr(proc, "lost", False))
+
+
+def _validate(run: _Launched) -> tuple[list[Path], dict[str, Any] | None]:
+    """(the output files, None) when the step exited 0 and wrote at least one output, all regular
+    files; else ([], the failure: {reason}, plus ``bad_output`` when the program itself is at fault and
+    no retry helps)."""
+    if run.code != 0:
+        reason = f"killed by signal {-run.code}" if run.code < 0 else f"exit code {run.code}"
+        return [], {"reason": reason + (" (its warm template died)" if run.lost else "")}
+    files = sorted(p for p in run.out_dir.rglob("*") if not p.is_dir())
     bad = [p for p in files if p.is_symlink() or not p.is_file()]
     if bad or not files:
-        kept = _keep_failed_log(store, task, log_path)
-        remove_tree(staging)
-        what = f"wrote a non-regular file {bad[0].relative_to(out_dir)}" if bad else "wrote no output files"
-        return {"ok": False, "host": host, "reason": what, "log": str(kept), "bad_output": True,
-                "tail": _tail(kept, LOG_TAIL)}
-    committed = {p.relative_to(out_dir).as_posix(): store.put(p) for p in files}
-    log_entry = store.put(log_path)
+        what = f"wrote a non-regular file {bad[0].relative_to(run.out_dir)}" if bad else "wrote no output files"
+        return [], {"reason": what, "bad_output": True}
+    return files, None
+
+
+def _record(store: Store, task: StepTask, run: _Launched, files: list[Path], executor: str, host: str
+            ) -> dict[str, Any]:
+    """Hash the output ``files`` and the log into the store's objects; the step's key record (docs/store.md)."""
+    committed = {p.relative_to(run.out_dir).as_posix(): store.put(p) for p in files}
+    log_entry = store.put(run.log_path)
+    meta, usage = run.meta, run.usage
     versions = {"python": platform.python_version(), "holoflow": __version__, "platform": platform.platform()}
     versions.update(meta.pop("versions", {}) if isinstance(meta.get("versions"), dict) else {})
     if "torch" in meta:
         versions["torch"] = meta["torch"]
-    rec = {
+    return {
         "key": task.key, "stage": task.stage, "components": task.components, "outputs": committed,
         "provenance": {
-            **task.provenance, "argv0": Path(argv[0]).name, "meta": meta, "versions": versions,
-            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(t_start)),
-            "wall_s": round(wall, 3), "cpu_s": round(usage.ru_utime + usage.ru_stime, 3),
-            "peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "exit_code": code,
+            **task.provenance, "argv0": run.argv0, "meta": meta, "versions": versions,
+            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(run.t_start)),
+            "wall_s": round(run.wall, 3), "cpu_s": round(usage.ru_utime + usage.ru_stime, 3),
+            "peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "exit_code": run.code,
             "log": log_entry["digest"], "log_size": log_entry["size"],
-            "host": host, "executor": executor, "launch": "warm" if warm else "cold", "attempt": task.attempt,
+            "host": host, "executor": executor, "launch": "warm" if run.warm else "cold", "attempt": task.attempt,
             "resources": {**task.resources, **({"gpu_ids": task.env["CUDA_VISIBLE_DEVICES"]}
                                                if "CUDA_VISIBLE_DEVICES" in task.env else {})},
         },
     }
-    rec = store.write_record(rec, replace=task.replace)      # first commit of a key wins
-    remove_tree(staging)
-    return {"ok": True, "record": rec, "host": host}
 
 
 class ExecStep:
