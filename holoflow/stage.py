@@ -21,6 +21,10 @@ from typing import Any, Callable, NoReturn, TypeVar
 THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS",
                "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
 
+#: a progress callback, (done, total, what), as :meth:`Job.progress` takes it: engines and library loops
+#: take one (or None), so a stage program passes ``job.progress`` straight through
+Progress = Callable[[int, int, str], None] | None
+
 P = TypeVar("P")
 
 

@@ -18,7 +18,7 @@ def main() -> int:
     pcd_views, _ = load_view_set(job.input("pcd"), alpha_is_mask=True)
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
     model, log = pre_optimize(xyz, rgb, pcd_views, pano_views, cfg, job.engine, job.seed,
-                              progress=lambda d, n: job.progress(d, n, "iters"), device=job.device)
+                              progress=job.progress, device=job.device)
     save_result(job, model, log, pano_views, "gaussians.ply")     # G0, its fit and train_log.json
     return 0
 

@@ -20,7 +20,7 @@ def main() -> int:
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
     inp_views, _ = load_view_set(job.input("inp"), alpha_is_mask=False) if cfg.use_inp else ([], None)
     model, log = transfer_optimize(xyz, rgb, pano_views, inp_views, cfg, job.engine, job.seed,
-                                   progress=lambda d, n: job.progress(d, n, "iters"), device=job.device)
+                                   progress=job.progress, device=job.device)
     save_result(job, model, log, pano_views, "scene.ply")         # G1, its fit and train_log.json
     write_previews(model, job.output_dir / "previews", pano_views[0]["K"], job.engine, size=cfg.preview_size)
     return 0

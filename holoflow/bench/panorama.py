@@ -86,7 +86,7 @@ def main(argv: list[str]) -> int:
 
     import torch
 
-    from holoflow.imageops.preview import write_png
+    from holoflow.imageops.preview import write_preview
     from holoflow.scene import render_equirect, scene_from_prompt
 
     torch.set_num_threads(max(1, (os.cpu_count() or 2) // 2))
@@ -98,7 +98,7 @@ def main(argv: list[str]) -> int:
         imgs, times = run_chain(prompt, {k: v[0] for k, v in SIZES.items()})
         for stage in ("base_pano", "lineart", "stylize", "upscale", "detail"):
             img = 1.0 - imgs[stage] if stage == "lineart" else imgs[stage]
-            write_png(images_dir / f"pano-{name}-{stage}.png", img, width=args.preview_width)
+            write_preview(images_dir / f"pano-{name}-{stage}.png", img, width=args.preview_width)
         rows.append(("preview", prompt, times))
         print(prompt, {k: f"{v[0]:.2f}s" for k, v in times.items()}, flush=True)
     if args.paper:
@@ -108,7 +108,7 @@ def main(argv: list[str]) -> int:
         print("paper", prompt, {k: f"{v[0]:.2f}s" for k, v in times.items()}, flush=True)
     for prompt in DOZEN:
         rgb, _ = render_equirect(scene_from_prompt(prompt, 0), 512, 256, 2)
-        write_png(images_dir / f"dozen-{_slug(prompt)}.png", rgb, width=256)
+        write_preview(images_dir / f"dozen-{_slug(prompt)}.png", rgb, width=256)
 
     engines = {"base_pano": "procedural", "stylize": "classical", "upscale": "lanczos", "detail": "classical"}
     lines = ["# Panorama stages: default engine timings", "",

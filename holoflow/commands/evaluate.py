@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
     from holoflow.quality import metrics
-    from holoflow.recon.preview import write_png
+    from holoflow.io.image import write_png
 
     results: dict = {}
     cache: dict = {}

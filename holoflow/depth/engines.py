@@ -26,12 +26,10 @@ Engines (registered by name in holoflow/depth/config.py; docs/depth.md says what
 """
 from __future__ import annotations
 
-from typing import Callable
-
 import numpy as np
 
-#: progress callback: (done, total, what), as holoflow.stage.Job.progress and holoflow.networks take it
-Progress = Callable[[int, int, str], None] | None
+from holoflow.stage import Progress
+
 
 #: simulated relative engine; sizes are fractions of the face side so any face size behaves alike
 SIM_RELATIVE = {
@@ -118,7 +116,7 @@ def layout_radial_depth(dirs: np.ndarray, layout: dict | None = None) -> np.ndar
 # Engines at the signature of their stage (holoflow/depth/config.py registers them by name):
 # engine(images, dirs, cos, truth_radial, seed, cfg, device, progress, pano) -> (array [F, h, w], facts)
 # ``images`` [F, h, w, 3] *linear* RGB faces, passed to a real engine as they are (it encodes sRGB once
-# itself: DESIGN.md, EXR colour is linear light); ``dirs`` [F, h, w, 3] world directions; ``cos``
+# itself: docs/conventions.md, EXR colour is linear light); ``dirs`` [F, h, w, 3] world directions; ``cos``
 # [F, h, w]; ``truth_radial`` [F, h, w] true radial depth in the faces (``simulated`` only); ``cfg`` the
 # stage's params (an engine's own params are fields there); ``progress(done, total, what)``; ``pano``
 # [H, W, 3] the whole linear panorama the faces come from (for engines that look at it whole).

@@ -12,10 +12,11 @@ import numpy as np
 
 from holoflow.depth.align import Alignment, align_faces
 from holoflow.depth.config import MetricAlignParams, TangentDepthParams
-from holoflow.depth.engines import Progress, resolve_engine
+from holoflow.depth.engines import resolve_engine
 from holoflow.depth.faces import face_rays, find_overlaps
 from holoflow.depth.metric import disparity_to_depth, robust_affine_fit, sky_mixed_edges
 from holoflow.depth.metrics import depth_metrics
+from holoflow.stage import Progress
 
 
 @dataclass

@@ -1,4 +1,5 @@
-"""A user's own panorama file -> linear RGB equirect (what ``--use base_pano=FILE`` imports).
+"""A user's own panorama file -> linear RGB equirect (what ``--use base_pano=FILE`` imports); and the
+one PNG writer (``write_png``).
 
 Reads JPG, PNG (8 / 16 bit), TIFF, HDR and EXR through OpenImageIO. Integer files (8 / 16 bit) are
 sRGB-encoded and decoded to linear light; float files (HDR, EXR, float TIFF) are linear already and
@@ -93,3 +94,11 @@ def _sha256(path: Path) -> str:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
+
+
+def write_png(path: str | Path, rgb_u8: np.ndarray) -> None:
+    """Write an 8-bit sRGB image [H, W, 3] as a PNG (Pillow, no optimisation pass: the same bytes for
+    the same pixels); the one PNG writer (previews, pictures)."""
+    from PIL import Image
+
+    Image.fromarray(np.ascontiguousarray(rgb_u8), "RGB").save(str(path), optimize=False)

@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import math
 
-from holoflow.networks.common import Progress, report
+from holoflow.networks.common import report
+from holoflow.stage import Progress
 
 NEGATIVE_PROMPT = ("blur, worst quality, low quality, watermark, text, logo, username, seam, "
                    "border, frame, collage")

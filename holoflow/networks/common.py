@@ -1,15 +1,14 @@
-"""Small helpers shared by the real-model engines: devices, progress, wrap resize (colour: holoflow.imageops.color).
+"""Small helpers shared by the real-model engines: devices, progress, wrap resize (colour:
+holoflow.imageops.color).
 
 Engines take and return numpy float32 linear RGB ``[H, W, 3]`` in [0, 1]; networks see sRGB.
 Panoramas wrap in longitude: column W is column 0 (docs/engines.md).
 """
 from __future__ import annotations
 
-from typing import Callable
-
 import numpy as np
 
-Progress = Callable[[int, int, str], None] | None
+from holoflow.stage import Progress
 
 
 def report(progress: Progress, done: int, total: int, what: str) -> None:

@@ -13,8 +13,9 @@ import numpy as np
 from holoflow.imageops.color import srgb_to_linear
 from holoflow.networks.circular import (NEGATIVE_PROMPT, decode_periodic, initial_noise, latent_grid, load_sd,
                                        overlap_columns, step_callback)
-from holoflow.networks.common import Progress, resize_wrap, to_hwc, torch_device
+from holoflow.networks.common import resize_wrap, to_hwc, torch_device
 from holoflow.networks.weights import resolve
+from holoflow.stage import Progress
 
 
 def stylize(pano: np.ndarray, lineart: np.ndarray, prompt: str, width: int = 1536, height: int = 768,

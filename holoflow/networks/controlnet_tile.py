@@ -19,8 +19,9 @@ import numpy as np
 
 from holoflow.imageops.color import linear_to_srgb, srgb_to_linear
 from holoflow.networks.circular import NEGATIVE_PROMPT, load_sd
-from holoflow.networks.common import Progress, report, resize_wrap, to_chw, torch_device
+from holoflow.networks.common import report, resize_wrap, to_chw, torch_device
 from holoflow.networks.weights import resolve
+from holoflow.stage import Progress
 
 
 def tile_grid(width: int, height: int, tile: int, overlap: int) -> tuple[list[int], list[int], int, int]:

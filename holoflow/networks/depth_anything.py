@@ -11,8 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 from holoflow.imageops.color import linear_to_srgb
-from holoflow.networks.common import Progress, report, torch_device
+from holoflow.networks.common import report, torch_device
 from holoflow.networks.weights import resolve
+from holoflow.stage import Progress
 
 
 def to_uint8_srgb(images: np.ndarray) -> np.ndarray:

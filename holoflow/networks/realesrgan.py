@@ -15,8 +15,9 @@ import math
 import numpy as np
 
 from holoflow.imageops.color import linear_to_srgb, srgb_to_linear
-from holoflow.networks.common import Progress, half_on_cuda, report, resize_wrap, to_chw, to_hwc, torch_device
+from holoflow.networks.common import half_on_cuda, report, resize_wrap, to_chw, to_hwc, torch_device
 from holoflow.networks.weights import load_state_dict, resolve, weight_file
+from holoflow.stage import Progress
 
 
 @functools.cache

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from holoflow.networks.common import Progress, report, torch_device
+from holoflow.networks.common import report, torch_device
 from holoflow.networks.depth_anything import to_uint8_srgb
 from holoflow.networks.weights import resolve
+from holoflow.stage import Progress
 
 
 def remove_padding(depth, h: int, w: int, padded: bool):

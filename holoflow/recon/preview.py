@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from holoflow.io.image import write_png
+
 
 def yaw_cameras(n: int, pitch_deg: float = 0.0) -> torch.Tensor:
     """n world-to-camera viewmats [n, 4, 4] at the origin, yaw 0, 360/n, ... degrees (yaw 0 looks along
@@ -28,13 +30,6 @@ def to_uint8(img: torch.Tensor | np.ndarray) -> np.ndarray:
     """sRGB [..., 3] in [0, 1] -> uint8 (rounded)."""
     a = np.asarray(img.detach().cpu() if isinstance(img, torch.Tensor) else img, dtype=np.float32)
     return (np.clip(a, 0, 1) * 255.0 + 0.5).astype(np.uint8)
-
-
-def write_png(path: str | Path, rgb_u8: np.ndarray) -> None:
-    """Write an 8-bit sRGB image [H, W, 3]."""
-    from PIL import Image
-
-    Image.fromarray(np.ascontiguousarray(rgb_u8), "RGB").save(str(path), optimize=False)
 
 
 def write_gif(path: str | Path, frames_u8: list[np.ndarray], ms_per_frame: int = 120) -> None:

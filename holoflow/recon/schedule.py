@@ -15,15 +15,14 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Callable
 
 import numpy as np
 import torch
 
 from holoflow.quality import metrics
 from holoflow.recon.config import OptimParams, PreOptParams, TransferOptParams
+from holoflow.stage import Progress
 
-Progress = Callable[[int, int], None]
 TRAIN_SEED_STRIDE = 1_000_003   # train_seed k moves every phase's seed by k x this (a prime, far from 1000 i)
 
 
@@ -81,9 +80,9 @@ def train_config(iterations: int, cfg: OptimParams, backend: str, extent: float 
 
 
 def run_phases(model, phases: list[tuple[str, list[dict], int]], cfg: OptimParams, backend: str, seed: int,
-               progress: Progress | None = None, extent: float | None = None) -> dict:
+               progress: Progress = None, extent: float | None = None) -> dict:
     """Train ``model`` in place through ``phases`` = [(name, views, iterations)], in order; phases with
-    0 iterations are skipped. ``progress(done, total)`` counts iterations over all phases.
+    0 iterations are skipped. ``progress(done, total, "iters")`` counts iterations over all phases.
     Phase i draws its views from seed + 1000 i + TRAIN_SEED_STRIDE x ``cfg.train_seed``:
     another train_seed gives an independent optimisation of the same inputs (training noise).
     ``extent``: the scene extent (m) of every phase (``panorama_extent``; None: the trainer's default).
@@ -102,9 +101,9 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], cfg: OptimParam
             raise ValueError(f"phase {name}: no training views")
         start = done
 
-        def phase_progress(k, _n=None, _start=start):
+        def phase_progress(k, _n=None, _what="", _start=start):
             if progress is not None:
-                progress(_start + int(k), total)
+                progress(_start + int(k), total, "iters")
 
         t0 = time.perf_counter()
         phase_seed = seed + 1000 * i + TRAIN_SEED_STRIDE * cfg.train_seed
@@ -121,7 +120,7 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], cfg: OptimParam
 
 def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pano_views: list[dict],
                  cfg: PreOptParams, backend: str, seed: int,
-                 progress: Progress | None = None, device: str = "cpu"):
+                 progress: Progress = None, device: str = "cpu"):
     """G0: init from P_f, ``cfg.pcd_iters`` on the PCD set (masked), then ``cfg.pano_iters`` on the PANO
     set, trained on ``device``. Returns (model, log)."""
     model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree)
@@ -132,7 +131,7 @@ def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pan
 
 def transfer_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pano_views: list[dict], inp_views: list[dict],
                       cfg: TransferOptParams, backend: str, seed: int,
-                      progress: Progress | None = None, device: str = "cpu"):
+                      progress: Progress = None, device: str = "cpu"):
     """G1: fresh init from P_f, ``cfg.iters`` on PANO + INP sets together (INP left out when
     ``cfg.use_inp`` is false: the paper's ablation), trained on ``device``. Returns (model, log)."""
     model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree)

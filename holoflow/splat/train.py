@@ -104,8 +104,8 @@ def masked_loss(rgb: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | No
 def train(model: GaussianModel, views: list[dict], cfg: TrainConfig | None = None, progress=None,
           seed: int = 0) -> dict:
     """Optimise ``model`` in place on ``views`` (dicts: image [H, W, 3] float linear, mask [H, W] or
-    None, viewmat [4, 4] world-to-camera, K [3, 3]). progress(done, total) is called every step.
-    Returns a JSON-able log: per-step loss, Gaussian count after each densification, timings, notes."""
+    None, viewmat [4, 4] world-to-camera, K [3, 3]). ``progress(done, total, "iters")`` is called every
+    step (holoflow.stage.Progress). Returns a JSON-able log: per-step loss, Gaussian count after each densification, timings, notes."""
     cfg = cfg or TrainConfig()
     if not views:
         raise ValueError("train: no views")
@@ -167,7 +167,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
                 log["notes"].append(event["note"])
         log["count"].append(len(model))
         if progress is not None:
-            progress(it, cfg.iterations)
+            progress(it, cfg.iterations, "iters")
     log["loss"] = torch.stack(losses).tolist()
     log["time_s"] = time.perf_counter() - t0
     log["final_count"] = len(model)

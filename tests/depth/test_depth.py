@@ -310,7 +310,7 @@ def test_unknown_engines_fail_clearly(room_pano):
 
 
 def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room_pano):
-    """The real engines encode sRGB themselves (DESIGN.md: EXR colour is linear light), so the depth code
+    """The real engines encode sRGB themselves (docs/conventions.md: EXR colour is linear light), so the depth code
     must hand them the *linear* faces: an encode here too would be a double encode. Their progress
     callbacks are called (done, total, what), as holoflow.stage.Job.progress takes them."""
     from holoflow.networks import depth_anything, zoedepth
