@@ -13,6 +13,17 @@ _FACES = ("(images: [F, h, w, 3] linear, dirs: [F, h, w, 3], cos: [F, h, w], tru
 _AUTO = {"auto": "simulated where the input carries a truth depth, else layout (holoflow.depth.engines.resolve_engine)"}
 
 
+def _camera_height():
+    """The layout engine's eye height: one field of both depth stages (it gives relative and metric depth)."""
+    return param(1.6, "layout: eye height above the floor / ground (the metric scale)", "m", gt=0)
+
+
+def _scene():
+    """The layout engine's scene kind: one field of both depth stages."""
+    return param("auto", "layout: room layout (indoor), ground / vertical / sky (outdoor), or decided "
+                 "from the image (auto)", choices=("auto", "indoor", "outdoor"))
+
+
 @dataclass(frozen=True)
 class TangentDepthParams(StageParams):
     """Panorama -> 20 padded icosahedron tangent faces -> relative disparity -> alignment -> blending."""
@@ -40,9 +51,8 @@ class TangentDepthParams(StageParams):
     blend_ramp: float = param(0.1, "faces blend with weights falling to 0 over this outer fraction of the "
                               "half-size", gt=0, le=1)
     model: str = param("", "depth_anything: local dir or model id in the user's cache")
-    camera_height: float = param(1.6, "layout: eye height above the floor / ground (the metric scale)", "m", gt=0)
-    scene: str = param("auto", "layout: room layout (indoor), ground / vertical / sky (outdoor), or decided "
-                       "from the image (auto)", choices=("auto", "indoor", "outdoor"))
+    camera_height: float = _camera_height()
+    scene: str = _scene()
 
 
 @dataclass(frozen=True)
@@ -64,6 +74,5 @@ class MetricAlignParams(StageParams):
     max_depth: float = param(3000.0, "a metric disparity below 1 / max_depth is sky (+inf)", "m", gt=0)
     huber: float = param(0.05, "Huber threshold on the relative residual of the global fit", gt=0)
     model: str = param("", "zoedepth: local dir or model id in the user's cache")
-    camera_height: float = param(1.6, "layout: eye height above the floor / ground (the metric scale)", "m", gt=0)
-    scene: str = param("auto", "layout: room layout (indoor), ground / vertical / sky (outdoor), or decided "
-                       "from the image (auto)", choices=("auto", "indoor", "outdoor"))
+    camera_height: float = _camera_height()
+    scene: str = _scene()

@@ -74,8 +74,6 @@ class LayoutConfig:
     """weight of the log-normal prior (sigma 0.7 in log metres) on the wall distance around typical_distance."""
     typical_distance: float = 3.0
     """metres: the most likely horizontal distance of a wall (indoors) or facade (outdoors)."""
-    prob_mix: float = 0.0
-    """region probability = global colour model ^ (1 - mix) x per-column colour model ^ mix."""
     manhattan: bool = True
     """indoors: fit Manhattan walls (4 orientations from the horizontal vanishing directions x offsets)
     per column instead of a free wall distance per column (falls back to free when no yaw is found)."""
@@ -86,6 +84,8 @@ class LayoutConfig:
     ceiling_steps: int = 29
     """number of ceiling heights (log-spaced, 0.3..2.5 x camera_height above the eye) tried by the
     Manhattan fit (each one a DP over the columns)."""
+    free_ceiling_steps: int = 15
+    """the same for the free-wall fit (indoors without a Manhattan yaw, or ``manhattan`` off)."""
     typical_ceiling: float = 1.2
     """metres: the most likely height of the ceiling above the eye (a 2.4-3 m room, eye at 1.6 m)."""
     ceiling_prior: float = 2.0
@@ -174,23 +174,6 @@ def region_probability(lab: np.ndarray, seed: np.ndarray, other: np.ndarray, bin
     ho /= ho.sum()
     p = hs / (hs + ho)
     return p[idx]
-
-
-def local_probability(lab: np.ndarray, seed: np.ndarray, spread: float = 12.0) -> np.ndarray:
-    """P(same surface as the seed rows of this column) [H, W]: colour distance (Lab) to the seed's
-    per-column median colour (smoothed over ``spread`` columns), scaled by the seed's own spread."""
-    import scipy.ndimage as ndi
-
-    H, W = seed.shape
-    ref = np.zeros((W, 3))
-    for c in range(W):
-        col = lab[seed[:, c], c]
-        ref[c] = np.median(col, axis=0) if len(col) else lab[:, c].mean(0)
-    ref = ndi.gaussian_filter1d(ref, spread, axis=0, mode="wrap")  # [W, 3]
-    w = np.array([0.5, 1.0, 1.0])  # lightness varies with shading more than chroma does
-    dist = np.sqrt((((lab - ref[None]) * w) ** 2).sum(-1))  # [H, W]
-    tau = 2.0 * float(np.median(dist[seed])) + 2.0
-    return np.exp(-0.5 * (dist / tau) ** 2)
 
 
 def row_costs(prob: np.ndarray, edges: np.ndarray, edge_weight: float) -> np.ndarray:
@@ -307,7 +290,7 @@ def estimate_layout_depth(pano: np.ndarray, cfg: LayoutConfig | None = None,
         if v is not None and facts["upright"]["tilt_deg"] > cfg.min_tilt_deg:
             R = rotation_to_upright(v)
             srgb = np.clip(rotate_equirect(srgb.astype(np.float64), R) + 0.5, 0, 255).astype(np.uint8)
-    est = _estimate(work, srgb, cfg, facts, H0, W0)
+    est = _estimate(srgb, cfg, facts, H0, W0)
     if R is not None:  # back to the input's frame: depth(d) = upright depth(R d), via disparity (sky 0)
         disp = np.where(np.isfinite(est.depth), 1.0 / np.maximum(est.depth, 1e-9), 0.0)
         disp = rotate_equirect(disp, R.T, mode="nearest")
@@ -315,7 +298,27 @@ def estimate_layout_depth(pano: np.ndarray, cfg: LayoutConfig | None = None,
     return est
 
 
-def _estimate(work, srgb, cfg, facts, H0, W0):
+@dataclass
+class _Frame:
+    """What the boundary fits found that turning wall distances into depth needs: the work size
+    (Hk, Wk) and output size (H0, W0) in pixels, the eye height ``h`` (metres), the row latitudes
+    ``lat`` [Hk], the zenith region's probability ``pc`` [Hk, Wk] and edges [Hk, Wk] (the outdoor sky
+    boundary), the config and the facts being collected."""
+
+    Hk: int
+    Wk: int
+    H0: int
+    W0: int
+    h: float
+    lat: np.ndarray
+    pc: np.ndarray
+    edges: np.ndarray
+    cfg: LayoutConfig
+    facts: dict
+
+
+def _estimate(srgb, cfg, facts, H0, W0):
+    """Depth [H0, W0] of the upright work panorama ``srgb`` [Hk, Wk, 3] (uint8)."""
     Hk, Wk = srgb.shape[:2]
     lab = _wrap_blur(_lab(srgb), 1.0)
     lat = _latitudes(Hk)
@@ -327,9 +330,10 @@ def _estimate(work, srgb, cfg, facts, H0, W0):
     other_f = (L > -np.radians(8)) & (L < np.radians(35))
     seed_c = (L > np.radians(50)) & (L < np.radians(85))
     other_c = (L < np.radians(8)) & (L > -np.radians(35))
-    pf = _wrap_blur(_combine(region_probability(lab, seed_f, other_f), local_probability(lab, seed_f), cfg), 1.0)
-    pc = _wrap_blur(_combine(region_probability(lab, seed_c, other_c), local_probability(lab, seed_c), cfg), 1.0)
+    pf = _wrap_blur(np.maximum(region_probability(lab, seed_f, other_f), 1e-6), 1.0)
+    pc = _wrap_blur(np.maximum(region_probability(lab, seed_c, other_c), 1e-6), 1.0)
     h = float(cfg.camera_height)
+    frame = _Frame(Hk, Wk, H0, W0, h, lat, pc, edges, cfg, facts)
     cost_f = row_costs(pf, edges, cfg.edge_weight)  # [Hk, Wk] floor starts at row b
     # ceiling: mirrored rows; cost_c[b] = 'the ceiling ends above row b' (rows < b are ceiling)
     ef = np.zeros_like(edges)
@@ -344,9 +348,10 @@ def _estimate(work, srgb, cfg, facts, H0, W0):
     if scene == "indoor" and cfg.manhattan:
         d = _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts)
         if d is not None:
-            return _finish(d, facts["ceiling_above_eye_m"], h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges)
+            return _finish(d, facts["ceiling_above_eye_m"], frame)
     best = None
-    heights = [None] if scene != "indoor" else list(h * np.exp(np.linspace(np.log(0.3), np.log(2.5), 15)))
+    heights = [None] if scene != "indoor" else list(h * np.exp(np.linspace(np.log(0.3), np.log(2.5),
+                                                                           cfg.free_ceiling_steps)))
     for ceiling in heights:
         if ceiling is None:
             data = data_f
@@ -361,7 +366,7 @@ def _estimate(work, srgb, cfg, facts, H0, W0):
     _, ceiling, k = best
     if ceiling is not None:
         facts["ceiling_above_eye_m"] = round(float(ceiling), 3)
-    return _finish(dist[k], ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges)
+    return _finish(dist[k], ceiling, frame)
 
 
 def _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts):
@@ -407,13 +412,15 @@ def _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts):
     return dW[path, cols[0]]
 
 
-def _finish(d, ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges):
-    """Depth [H0, W0] from the horizontal wall distance per column ``d`` [Wk] (metres)."""
+def _finish(d, ceiling, f: _Frame):
+    """Depth [H0, W0] from the horizontal wall distance per column ``d`` [Wk] (metres) and the ceiling
+    height above the eye (metres; None outdoors: the sky boundary is fitted here)."""
+    Hk, Wk, H0, W0, h, cfg, facts = f.Hk, f.Wk, f.H0, f.W0, f.h, f.cfg, f.facts
     lat_f = -np.arctan(h / d)
     if ceiling is not None:
         lat_c = np.arctan(ceiling / d)
     else:  # outdoors: the sky region around the zenith, its own boundary per column
-        lat_c = np.pi / 2 - np.pi * upper_boundary(pc, edges, lat, cfg) / Hk
+        lat_c = np.pi / 2 - np.pi * upper_boundary(f.pc, f.edges, f.lat, cfg) / Hk
         lat_c = np.maximum(lat_c, lat_f + np.pi / Hk)  # the sky starts above the ground
     cols = (np.arange(W0) + 0.5) * Wk / W0 - 0.5
     lat_f0 = _interp_wrap(lat_f, cols)
@@ -423,12 +430,6 @@ def _finish(d, ceiling, h, Hk, Wk, H0, W0, cfg, facts, lat, pc, edges):
                                  "p10": round(float(np.percentile(d, 10)), 3),
                                  "p90": round(float(np.percentile(d, 90)), 3)}
     return LayoutDepth(depth.astype(np.float32), facts)
-
-
-def _combine(p_global: np.ndarray, p_local: np.ndarray, cfg: LayoutConfig) -> np.ndarray:
-    """Geometric mix of the two region probabilities (``LayoutConfig.prob_mix``)."""
-    m = float(cfg.prob_mix)
-    return np.power(np.maximum(p_global, 1e-6), 1 - m) * np.power(np.maximum(p_local, 1e-6), m)
 
 
 def _interp_wrap(values: np.ndarray, x: np.ndarray) -> np.ndarray:
