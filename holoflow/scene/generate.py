@@ -293,10 +293,30 @@ _FURNITURE = {
 
 
 def _indoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Room, list[str]]:
-    rng = b.rng
+    """The room, then its materials, then each item placed in turn, then a ceiling light (each draws
+    from ``b.rng`` in turn). Returns the room and the names of what was placed."""
     kinds = [vocab.ROOMS[x] for x in w.words if x in vocab.ROOMS]
     kind = next((k for k in kinds if k != "living"), kinds[0] if kinds else "living")
     room, walls, area = _room(b, w, kind)
+    mats = _indoor_materials(b, w, sky, effects)
+    names = []
+    table_frame = None
+    for item in _indoor_items(w, kind, walls, effects):
+        frame = _place(b, item, walls, room, area, table_frame)
+        if frame is None:
+            continue
+        _BUILD[item](b, frame, mats, room)
+        names.append(item)
+        if item == "table":
+            table_frame = frame
+    if effects.lights:
+        _ceiling_light(b, room, area, mats)
+        names.append("ceiling_light")
+    return room, names
+
+
+def _indoor_items(w: Words, kind: str, walls: list[_Wall], effects: Effects) -> list[str]:
+    """What the room holds: its kind's furniture, what the prompt names, a lamp when lit."""
     items = list(vocab.ROOM_KINDS[kind][2])
     if kind == "library":                       # shelves along the walls, as many as fit
         items += ["shelves"] * int(sum(wl.length for wl in walls) / 2.5)
@@ -306,7 +326,13 @@ def _indoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Room, li
             items.append(f)
     if effects.lights and "lamp" not in items:
         items.append("lamp")
-    mats = {
+    return items
+
+
+def _indoor_materials(b: _Builder, w: Words, sky: Sky, effects: Effects) -> dict[str, int]:
+    """The room's materials by role (furniture builders look them up by these names)."""
+    rng = b.rng
+    return {
         "wood": _surface(b, w, "table", "wood"),
         "fabric": _surface(b, w, "sofa", "fabric", color=_pick(rng, [(0.25, 0.28, 0.32), (0.45, 0.12, 0.08),
                                                                     (0.12, 0.2, 0.3), (0.35, 0.3, 0.22)])),
@@ -327,65 +353,61 @@ def _indoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Room, li
                              0.45, 1.0),
         "books": b.material("books", (0.3, 0.16, 0.07), (0.3, 0.16, 0.07), 0.4),
     }
-    names = []
-    table_frame = None
-    for item in items:
-        wdt, dep, on_wall, mounted = _FURNITURE[item]
-        frame = None
-        for _ in range(40):
-            if on_wall:
-                wall = walls[int(rng.integers(len(walls)))]
-                if wall.length < wdt + 0.4:
-                    continue
-                t = rng.uniform(wdt / 2 + 0.2, wall.length - wdt / 2 - 0.2)
-                ux, uz = (wall.p1[0] - wall.p0[0]) / wall.length, (wall.p1[1] - wall.p0[1]) / wall.length
-                ax, az = wall.p0[0] + ux * t, wall.p0[1] + uz * t
-                yaw = math.atan2(wall.n[0], wall.n[1])
-                fx, fz = ax + wall.n[0] * dep / 2, az + wall.n[1] * dep / 2
-            elif item == "chair" and table_frame is not None:
-                side = int(rng.integers(4))
-                tw, td = _FURNITURE["table"][0], _FURNITURE["table"][1]
-                lx, lz = [(0, td / 2 + 0.4), (0, -td / 2 - 0.4), (tw / 2 + 0.4, 0), (-tw / 2 - 0.4, 0)][side]
-                lx += rng.uniform(-0.3, 0.3) * (side < 2)
-                ax, _, az = table_frame.at(lx, 0, lz)
-                yaw = table_frame.yaw + [math.pi, 0, -math.pi / 2, math.pi / 2][side]
-                fx, fz = ax, az
-            else:
-                ax, az = rng.uniform(area[0], area[1]), rng.uniform(area[2], area[3])
-                yaw = rng.choice([0.0, math.pi / 2]) + rng.uniform(-0.15, 0.15)
-                fx, fz = ax, az
-            radius = 0.5 * math.hypot(wdt, dep) * 0.8
-            if mounted:
-                if any(math.hypot(ax - mx, az - mz) < wdt / 2 + mr for mx, mz, mr in b.footprints_mounted):
-                    continue
-                frame = _Frame(ax, az, yaw, room.floor_y)
-                b.footprints_mounted.append((ax, az, wdt / 2))
-                break
-            if item == "rug" and math.hypot(fx, fz) < 2.5:
-                frame = _Frame(ax, az, yaw, room.floor_y)
-                break
-            if item != "rug" and b.free(fx, fz, radius, (wdt / 2, dep / 2), yaw):
-                frame = _Frame(ax, az, yaw, room.floor_y)
-                b.footprints.append((fx, fz, radius))
-                break
-        if frame is None:
-            continue
-        _BUILD[item](b, frame, mats, room)
-        names.append(item)
-        if item == "table":
-            table_frame = frame
-    if effects.lights:                          # a ceiling light too, so the whole room is lit
-        cx, cz = 0.5 * (area[0] + area[1]), 0.5 * (area[2] + area[3])
-        r = math.hypot(cx, cz)
-        if r < 1.2:                              # not right above the camera
-            ux, uz = (cx / r, cz / r) if r > 1e-6 else (0.0, 1.0)
-            cx, cz = 1.2 * ux, 1.2 * uz
-        y = room.ceiling_y + 0.35
-        b.cylinder((cx, room.ceiling_y + 0.12, cz), 0.01, 0.12, mats["metal"])
-        b.ellipsoid((cx, y, cz), (0.12, 0.12, 0.12), mats["shade"])
-        b.lights.append(PointLight(_v((cx, y + 0.2, cz)), _v((1.2, 1.05, 0.8))))
-        names.append("ceiling_light")
-    return room, names
+
+
+def _place(b: _Builder, item: str, walls: list[_Wall], room: Room, area, table_frame) -> _Frame | None:
+    """Where ``item`` goes: against a wall, at the table (a chair), or free in ``area``, its footprint
+    taken; None after 40 tries."""
+    rng = b.rng
+    wdt, dep, on_wall, mounted = _FURNITURE[item]
+    for _ in range(40):
+        if on_wall:
+            wall = walls[int(rng.integers(len(walls)))]
+            if wall.length < wdt + 0.4:
+                continue
+            t = rng.uniform(wdt / 2 + 0.2, wall.length - wdt / 2 - 0.2)
+            ux, uz = (wall.p1[0] - wall.p0[0]) / wall.length, (wall.p1[1] - wall.p0[1]) / wall.length
+            ax, az = wall.p0[0] + ux * t, wall.p0[1] + uz * t
+            yaw = math.atan2(wall.n[0], wall.n[1])
+            fx, fz = ax + wall.n[0] * dep / 2, az + wall.n[1] * dep / 2
+        elif item == "chair" and table_frame is not None:
+            side = int(rng.integers(4))
+            tw, td = _FURNITURE["table"][0], _FURNITURE["table"][1]
+            lx, lz = [(0, td / 2 + 0.4), (0, -td / 2 - 0.4), (tw / 2 + 0.4, 0), (-tw / 2 - 0.4, 0)][side]
+            lx += rng.uniform(-0.3, 0.3) * (side < 2)
+            ax, _, az = table_frame.at(lx, 0, lz)
+            yaw = table_frame.yaw + [math.pi, 0, -math.pi / 2, math.pi / 2][side]
+            fx, fz = ax, az
+        else:
+            ax, az = rng.uniform(area[0], area[1]), rng.uniform(area[2], area[3])
+            yaw = rng.choice([0.0, math.pi / 2]) + rng.uniform(-0.15, 0.15)
+            fx, fz = ax, az
+        radius = 0.5 * math.hypot(wdt, dep) * 0.8
+        if mounted:
+            if any(math.hypot(ax - mx, az - mz) < wdt / 2 + mr for mx, mz, mr in b.footprints_mounted):
+                continue
+            b.footprints_mounted.append((ax, az, wdt / 2))
+            return _Frame(ax, az, yaw, room.floor_y)
+        if item == "rug" and math.hypot(fx, fz) < 2.5:
+            return _Frame(ax, az, yaw, room.floor_y)
+        if item != "rug" and b.free(fx, fz, radius, (wdt / 2, dep / 2), yaw):
+            b.footprints.append((fx, fz, radius))
+            return _Frame(ax, az, yaw, room.floor_y)
+    return None
+
+
+def _ceiling_light(b: _Builder, room: Room, area, mats: dict[str, int]) -> None:
+    """A ceiling light above the middle of the free area (not right above the camera), so the whole
+    room is lit."""
+    cx, cz = 0.5 * (area[0] + area[1]), 0.5 * (area[2] + area[3])
+    r = math.hypot(cx, cz)
+    if r < 1.2:                              # not right above the camera
+        ux, uz = (cx / r, cz / r) if r > 1e-6 else (0.0, 1.0)
+        cx, cz = 1.2 * ux, 1.2 * uz
+    y = room.ceiling_y + 0.35
+    b.cylinder((cx, room.ceiling_y + 0.12, cz), 0.01, 0.12, mats["metal"])
+    b.ellipsoid((cx, y, cz), (0.12, 0.12, 0.12), mats["shade"])
+    b.lights.append(PointLight(_v((cx, y + 0.2, cz)), _v((1.2, 1.05, 0.8))))
 
 
 def _pick(rng: np.random.Generator, options: list):
@@ -535,10 +557,20 @@ _HILLS = {"park": 5, "forest": 4, "lake": 4, "village": 4, "mountain": 3, "snow"
 
 
 def _outdoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Ground, list[str]]:
-    rng = b.rng
+    """Ground and water, then hills, mountains, trees, rocks, buildings and lamps, in that order (each
+    draws from ``b.rng`` in turn). Returns the ground and the names of what was placed."""
     biomes = [vocab.BIOMES[x] for x in w.words if x in vocab.BIOMES]
     biome = biomes[0] if biomes else "park"
-    names = [biome]
+    ground, water = _ground(b, w, biome)
+    spot = _spotter(b, ground)
+    placed = [biome, water, _hills(b, w, biome, spot), _mountains(b, w, biome), _trees(b, w, biome, spot),
+              _rocks(b, w, biome, spot), _buildings(b, w, biome, effects, spot), _lamps(b, effects, spot)]
+    return ground, [name for name in placed if name]
+
+
+def _ground(b: _Builder, w: Words, biome: str) -> tuple[Ground, str | None]:
+    """The ground plane and its water (a sea far off, or a lake): (ground, "sea" | "lake" | None)."""
+    rng = b.rng
     ground_m = _surface(b, w, "ground", biome)
     sea = w.has("sea", "ocean", "beach", "coast", "island")
     lake = sea or w.has("lake", "pond", "river") or biome == "lake"
@@ -550,13 +582,20 @@ def _outdoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Ground,
         big = 4000.0
         dist = big + rng.uniform(12.0, 25.0)
         ground.water.append([_r(dist * math.sin(az)), _r(dist * math.cos(az)), big])
-        names.append("sea")
-    elif lake:
+        return ground, "sea"
+    if lake:
         az = rng.uniform(-math.pi, math.pi)
         r = rng.uniform(12.0, 30.0)
         dist = r + rng.uniform(5.0, 12.0)
         ground.water.append([_r(dist * math.sin(az)), _r(dist * math.cos(az)), _r(r)])
-        names.append("lake")
+        return ground, "lake"
+    return ground, None
+
+
+def _spotter(b: _Builder, ground: Ground):
+    """``spot(rmin, rmax, radius)``: a random dry, free place (x, z) at rmin..rmax metres from the eye
+    (uniform over the annulus), its footprint of ``radius`` metres taken; None after 30 tries."""
+    rng = b.rng
 
     def dry(x, z, pad):
         return all(math.hypot(x - cx, z - cz) > r + pad for cx, cz, r in ground.water)
@@ -570,7 +609,11 @@ def _outdoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Ground,
                 return x, z
         return None
 
-    gy = EYE_HEIGHT
+    return spot
+
+
+def _hills(b: _Builder, w: Words, biome: str, spot) -> None:
+    rng, gy = b.rng, EYE_HEIGHT
     hill_m = _surface(b, w, "hill", biome)
     for _ in range(_HILLS.get(biome, 3) + 4 * w.has("hill", "hills", "hilly")):
         r = rng.uniform(25.0, 70.0)
@@ -578,87 +621,111 @@ def _outdoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Ground,
         if at:
             top = rng.uniform(4.0, 18.0)
             b.ellipsoid((at[0], gy + r * 0.6 - top, at[1]), (r, r * 0.6, r * rng.uniform(0.7, 1.3)), hill_m)
-    if biome == "mountain" or w.has("mountain", "mountains", "alpine"):
-        rock_m = _surface(b, w, "mountain", "mountain")
-        snow_m = b.material("snow", (0.62, 0.64, 0.68), (0.5, 0.54, 0.62), 4.0)
-        for k in range(7):                       # a ring of peaks: tall ellipsoids with snow caps
-            az = 2 * math.pi * k / 7 + rng.uniform(-0.3, 0.3)
-            d, r = rng.uniform(450.0, 700.0), rng.uniform(110.0, 200.0)
-            hgt = rng.uniform(1.4, 2.2) * r
-            c = (d * math.sin(az), gy + hgt * 0.3, d * math.cos(az))
-            b.ellipsoid(c, (r, hgt, r * 0.8), rock_m)
-            b.ellipsoid((c[0], c[1] - hgt * 0.33, c[2]), (r * 0.62, hgt * 0.69, r * 0.5), snow_m)
-        names.append("mountains")
+
+
+def _mountains(b: _Builder, w: Words, biome: str) -> str | None:
+    if not (biome == "mountain" or w.has("mountain", "mountains", "alpine")):
+        return None
+    rng, gy = b.rng, EYE_HEIGHT
+    rock_m = _surface(b, w, "mountain", "mountain")
+    snow_m = b.material("snow", (0.62, 0.64, 0.68), (0.5, 0.54, 0.62), 4.0)
+    for k in range(7):                       # a ring of peaks: tall ellipsoids with snow caps
+        az = 2 * math.pi * k / 7 + rng.uniform(-0.3, 0.3)
+        d, r = rng.uniform(450.0, 700.0), rng.uniform(110.0, 200.0)
+        hgt = rng.uniform(1.4, 2.2) * r
+        c = (d * math.sin(az), gy + hgt * 0.3, d * math.cos(az))
+        b.ellipsoid(c, (r, hgt, r * 0.8), rock_m)
+        b.ellipsoid((c[0], c[1] - hgt * 0.33, c[2]), (r * 0.62, hgt * 0.69, r * 0.5), snow_m)
+    return "mountains"
+
+
+def _trees(b: _Builder, w: Words, biome: str, spot) -> str | None:
     n_trees = _TREES.get(biome, 8) + 10 * w.has("tree", "trees", "forest")
-    if n_trees:
-        autumn = w.has("autumn", "fall")
-        colors = ([(0.6, 0.2, 0.03), (0.7, 0.45, 0.05), (0.45, 0.08, 0.03)] if autumn
-                  else [_color(b, w, "tree", (0.04, 0.18, 0.03))])
-        palette = [b.material("leaves", c, tuple(0.6 * x for x in c), 1.0) for c in colors]
-        bark = b.material("bark", (0.16, 0.1, 0.06), (0.08, 0.05, 0.03), 1.0)
-        conifer = biome in ("snow", "mountain") or w.has("pine", "pines", "conifer", "spruce")
-        for _ in range(n_trees):
-            at = spot(4.0, 50.0 if biome == "forest" else 70.0, 2.0)
-            if at is None:
-                continue
-            x, z = at
-            leaf = palette[int(rng.integers(len(palette)))]
-            h = rng.uniform(2.0, 4.0)
-            b.cylinder((x, gy - h / 2, z), rng.uniform(0.15, 0.3), h / 2, bark)
-            if conifer:
-                for k, s in enumerate((1.0, 0.72, 0.45)):
-                    b.ellipsoid((x, gy - h - 0.4 - 1.6 * k, z), (1.6 * s, 1.4, 1.6 * s), leaf)
-            else:
-                r = rng.uniform(1.5, 3.0)
-                b.ellipsoid((x, gy - h - r * 0.6, z), (r, r * 0.9, r), leaf)
-        names.append("trees")
+    if not n_trees:
+        return None
+    rng, gy = b.rng, EYE_HEIGHT
+    autumn = w.has("autumn", "fall")
+    colors = ([(0.6, 0.2, 0.03), (0.7, 0.45, 0.05), (0.45, 0.08, 0.03)] if autumn
+              else [_color(b, w, "tree", (0.04, 0.18, 0.03))])
+    palette = [b.material("leaves", c, tuple(0.6 * x for x in c), 1.0) for c in colors]
+    bark = b.material("bark", (0.16, 0.1, 0.06), (0.08, 0.05, 0.03), 1.0)
+    conifer = biome in ("snow", "mountain") or w.has("pine", "pines", "conifer", "spruce")
+    for _ in range(n_trees):
+        at = spot(4.0, 50.0 if biome == "forest" else 70.0, 2.0)
+        if at is None:
+            continue
+        x, z = at
+        leaf = palette[int(rng.integers(len(palette)))]
+        h = rng.uniform(2.0, 4.0)
+        b.cylinder((x, gy - h / 2, z), rng.uniform(0.15, 0.3), h / 2, bark)
+        if conifer:
+            for k, s in enumerate((1.0, 0.72, 0.45)):
+                b.ellipsoid((x, gy - h - 0.4 - 1.6 * k, z), (1.6 * s, 1.4, 1.6 * s), leaf)
+        else:
+            r = rng.uniform(1.5, 3.0)
+            b.ellipsoid((x, gy - h - r * 0.6, z), (r, r * 0.9, r), leaf)
+    return "trees"
+
+
+def _rocks(b: _Builder, w: Words, biome: str, spot) -> str | None:
     n_rocks = _ROCKS.get(biome, 3) + 8 * w.has("rock", "rocks", "boulder", "boulders", "rocky")
-    if n_rocks:
-        rock_m = _surface(b, w, "rock", "mountain")
-        for _ in range(n_rocks):
-            r = rng.uniform(0.3, 2.0)
-            at = spot(3.0, 60.0, r)
-            if at:
-                b.ellipsoid((at[0], gy - r * 0.25, at[1]), (r, r * rng.uniform(0.4, 0.8), r * rng.uniform(0.7, 1.2)),
-                            rock_m)
-        names.append("rocks")
+    if not n_rocks:
+        return None
+    rng, gy = b.rng, EYE_HEIGHT
+    rock_m = _surface(b, w, "rock", "mountain")
+    for _ in range(n_rocks):
+        r = rng.uniform(0.3, 2.0)
+        at = spot(3.0, 60.0, r)
+        if at:
+            b.ellipsoid((at[0], gy - r * 0.25, at[1]), (r, r * rng.uniform(0.4, 0.8), r * rng.uniform(0.7, 1.2)),
+                        rock_m)
+    return "rocks"
+
+
+def _buildings(b: _Builder, w: Words, biome: str, effects: Effects, spot) -> str | None:
     houses = biome == "village" or w.has("house", "houses", "cottage", "cabin", "farm", "farmhouse", "village",
                                          "town")
     city = biome == "city" or w.has("building", "buildings", "skyscraper", "skyscrapers", "tower", "towers")
-    if houses or city:
-        lit = effects.night and effects.lights
-        glass = (0.9, 0.7, 0.35) if lit else (0.1, 0.13, 0.17)
-        default = "concrete" if city else _pick(rng, ["plaster", "brick", "wood", "stone"])
-        facades = []
-        for _ in range(3):
-            base = _surface(b, w, "building", default, loose=True)
-            mat = b.materials[base]
-            facades.append(b.material("facade", mat.color, glass, 3.2, 1.2 if lit else 0.0))
-        roof = b.material("tiles", (0.35, 0.1, 0.05), (0.18, 0.05, 0.03), 0.25)
-        for _ in range(22 if city else 8):
-            if city:
-                hx, hz, hy = rng.uniform(5, 12), rng.uniform(5, 12), rng.uniform(8, 45)
-            else:
-                hx, hz, hy = rng.uniform(3, 5), rng.uniform(3, 5), rng.uniform(2.5, 4.0)
-            at = spot(12.0, 120.0, math.hypot(hx, hz))
-            if at is None:
-                continue
-            yaw = math.atan2(at[0], at[1]) + rng.uniform(-0.2, 0.2)
-            b.box((at[0], gy - hy, at[1]), (hx, hy, hz), yaw, facades[int(rng.integers(3))])
-            if not city:
-                b.box((at[0], gy - 2 * hy - 0.3, at[1]), (hx + 0.4, 0.3, hz + 0.4), yaw, roof)
-        names.append("buildings" if city else "houses")
-    if effects.lights:
-        glow = b.material("glow", (1.0, 0.8, 0.45), (1.0, 0.8, 0.45), 1.0, 4.0)
-        pole = b.material("metal", (0.08, 0.08, 0.09), (0.05, 0.05, 0.05))
-        for _ in range(6):
-            at = spot(5.0, 25.0, 0.3)
-            if at:
-                b.cylinder((at[0], gy - 1.7, at[1]), 0.05, 1.7, pole)
-                b.ellipsoid((at[0], gy - 3.6, at[1]), (0.2, 0.2, 0.2), glow)
-                b.lights.append(PointLight(_v((at[0], gy - 3.6, at[1])), _v((9.0, 7.2, 4.0))))
-        names.append("lamps")
-    return ground, names
+    if not (houses or city):
+        return None
+    rng, gy = b.rng, EYE_HEIGHT
+    lit = effects.night and effects.lights
+    glass = (0.9, 0.7, 0.35) if lit else (0.1, 0.13, 0.17)
+    default = "concrete" if city else _pick(rng, ["plaster", "brick", "wood", "stone"])
+    facades = []
+    for _ in range(3):
+        base = _surface(b, w, "building", default, loose=True)
+        mat = b.materials[base]
+        facades.append(b.material("facade", mat.color, glass, 3.2, 1.2 if lit else 0.0))
+    roof = b.material("tiles", (0.35, 0.1, 0.05), (0.18, 0.05, 0.03), 0.25)
+    for _ in range(22 if city else 8):
+        if city:
+            hx, hz, hy = rng.uniform(5, 12), rng.uniform(5, 12), rng.uniform(8, 45)
+        else:
+            hx, hz, hy = rng.uniform(3, 5), rng.uniform(3, 5), rng.uniform(2.5, 4.0)
+        at = spot(12.0, 120.0, math.hypot(hx, hz))
+        if at is None:
+            continue
+        yaw = math.atan2(at[0], at[1]) + rng.uniform(-0.2, 0.2)
+        b.box((at[0], gy - hy, at[1]), (hx, hy, hz), yaw, facades[int(rng.integers(3))])
+        if not city:
+            b.box((at[0], gy - 2 * hy - 0.3, at[1]), (hx + 0.4, 0.3, hz + 0.4), yaw, roof)
+    return "buildings" if city else "houses"
+
+
+def _lamps(b: _Builder, effects: Effects, spot) -> str | None:
+    if not effects.lights:
+        return None
+    gy = EYE_HEIGHT
+    glow = b.material("glow", (1.0, 0.8, 0.45), (1.0, 0.8, 0.45), 1.0, 4.0)
+    pole = b.material("metal", (0.08, 0.08, 0.09), (0.05, 0.05, 0.05))
+    for _ in range(6):
+        at = spot(5.0, 25.0, 0.3)
+        if at:
+            b.cylinder((at[0], gy - 1.7, at[1]), 0.05, 1.7, pole)
+            b.ellipsoid((at[0], gy - 3.6, at[1]), (0.2, 0.2, 0.2), glow)
+            b.lights.append(PointLight(_v((at[0], gy - 3.6, at[1])), _v((9.0, 7.2, 4.0))))
+    return "lamps"
 
 
 # ----------------------------------------------------------------------------------------- entry point
