@@ -5,7 +5,8 @@ Engines (holoflow.imageops.config.StylizeParams.ENGINES): ``classical`` (default
 XDoG lineart, then the OpenCV style named by the prompt's style words (holoflow.imageops.styles;
 ``style`` param: auto | none | a style name); no style word -> passthrough. ``controlnet_lineart``:
 SD 1.5 + ControlNet Lineart conditioned on the lineart of the base panorama
-(holoflow.networks.controlnet_lineart).
+(holoflow.networks.controlnet_lineart). A user's photo (``--use base_pano=PHOTO``) with no style asked
+for passes through unchanged with any engine, at its own size (holoflow/imageops/photo.py).
 """
 from __future__ import annotations
 
@@ -15,13 +16,23 @@ from holoflow.stage import Job, run_main
 def main() -> int:
     job = Job.from_argv()
     from holoflow.imageops.config import StylizeParams
-    from holoflow.io.exr import read_rgb, write_exr, write_rgb
+    from holoflow.imageops.photo import provenance, same_pixels, unaltered
+    from holoflow.imageops.styles import requested_style
+    from holoflow.io.exr import read_exr, read_rgb, write_exr, write_rgb
 
     cfg = job.config(StylizeParams)
-    base = read_rgb(job.input_file("pano", "pano.exr"))                               # [H, W, 3] linear
-    out, lines, attrs, meta = StylizeParams.ENGINES.get(job.engine)(base, job.prompt, cfg, job.seed, job.device,
-                                                                   job.progress)
-    attrs = {"holoflow.stage": "stylize", "holoflow.engine": job.engine, **attrs}
+    path = job.input_file("pano", "pano.exr")
+    base, src = read_rgb(path), read_exr(path)[1]                                      # [H, W, 3] linear
+    if unaltered(src) and requested_style(job.prompt, cfg.style) is None:            # the photo stays the photo
+        from holoflow.imageops.lineart import lineart
+
+        out, lines, attrs, meta = base, lineart(base), {"holoflow.style": "none"}, {"style": "none (user's photo)"}
+    else:
+        out, lines, attrs, meta = StylizeParams.ENGINES.get(job.engine)(base, job.prompt, cfg, job.seed,
+                                                                       job.device, job.progress)
+    attrs = {"holoflow.stage": "stylize", "holoflow.engine": job.engine, **attrs,
+             **provenance(src, same_pixels(out, base), cfg.max_width)}
+    meta["max_width"] = cfg.max_width
     job.meta(engine=job.engine, **meta)
     write_rgb(job.output("pano.exr"), out, attrs)
     write_exr(job.output("lineart.exr"), {"Y": lines}, {**attrs, "holoflow.meaning": "lineart, 1 = line"})

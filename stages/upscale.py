@@ -2,7 +2,8 @@
 
 Engines (holoflow.imageops.config.UpscaleParams.ENGINES): ``lanczos`` (default, offline): wrap-aware
 Lanczos-3 through OpenImageIO (holoflow.imageops.resize). ``realesrgan``: Real-ESRGAN (RRDBNet), tiled,
-wrap-padded at the seam (holoflow.networks.realesrgan).
+wrap-padded at the seam (holoflow.networks.realesrgan). An input wider than the stage's size keeps its
+own (up to ``max_width``; holoflow/imageops/photo.py).
 """
 from __future__ import annotations
 
@@ -12,13 +13,16 @@ from holoflow.stage import Job, run_main
 def main() -> int:
     job = Job.from_argv()
     from holoflow.imageops.config import UpscaleParams
-    from holoflow.io.exr import read_rgb, write_rgb
+    from holoflow.imageops.photo import provenance, same_pixels
+    from holoflow.io.exr import read_exr, read_rgb, write_rgb
 
     cfg = job.config(UpscaleParams)
-    pano = read_rgb(job.input_file("pano", "pano.exr"))                               # [H, W, 3] linear
+    path = job.input_file("pano", "pano.exr")
+    pano, src = read_rgb(path), read_exr(path)[1]                                      # [H, W, 3] linear
     out, meta = UpscaleParams.ENGINES.get(job.engine)(pano, job.prompt, cfg, job.seed, job.device, job.progress)
-    job.meta(engine=job.engine, **meta)
-    write_rgb(job.output("pano.exr"), out, {"holoflow.stage": "upscale", "holoflow.engine": job.engine})
+    job.meta(engine=job.engine, max_width=cfg.max_width, **meta)
+    write_rgb(job.output("pano.exr"), out, {"holoflow.stage": "upscale", "holoflow.engine": job.engine,
+                                            **provenance(src, same_pixels(out, pano), cfg.max_width)})
     return 0
 
 

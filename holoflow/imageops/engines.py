@@ -9,33 +9,39 @@ from holoflow.imageops.config import DetailParams, StylizeParams, UpscaleParams
 
 def stylize_classical(base: np.ndarray, prompt: str, cfg: StylizeParams, seed: int, device: str, progress):
     """Wrap-aware XDoG lineart, then the OpenCV style cfg.style names (auto: the prompt's style words;
-    none or no style word: passthrough). Returns (pano, lineart [h, w], attrs, meta) at cfg's size."""
+    none or no style word: passthrough). Returns (pano, lineart [h, w], attrs, meta) at cfg's size, or
+    the input's own when it is wider (``keep_size``: up to cfg.max_width)."""
     from holoflow.imageops.lineart import lineart
+    from holoflow.imageops.photo import keep_size
     from holoflow.imageops.resize import lanczos_resize
-    from holoflow.imageops.styles import STYLE_WORDS, style_from_prompt, stylize
+    from holoflow.imageops.styles import requested_style, stylize
 
-    style = style_from_prompt(prompt) if cfg.style == "auto" else None if cfg.style == "none" else cfg.style
-    if style is not None and style not in set(STYLE_WORDS.values()):
-        raise ValueError(f"unknown style {style!r}; use auto, none or one of {sorted(set(STYLE_WORDS.values()))}")
-    pano = base if base.shape[:2] == (cfg.height, cfg.width) else lanczos_resize(base, cfg.width, cfg.height)
+    style = requested_style(prompt, cfg.style)
+    size = keep_size(base.shape, cfg.width, cfg.height, cfg.max_width)
+    pano = base if base.shape[:2] == size else lanczos_resize(base, size[1], size[0])
     lines = lineart(pano)
     out = pano if style is None else stylize(pano, lines, style)
     return out, lines, {"holoflow.style": style or "none"}, {"style": style or "none (passthrough)"}
 
 
 def upscale_lanczos(pano: np.ndarray, prompt: str, cfg: UpscaleParams, seed: int, device: str, progress):
-    """Wrap-aware Lanczos-3 to cfg.width x cfg.height. Returns (pano, meta)."""
+    """Wrap-aware Lanczos-3 to cfg.width x cfg.height, or the input's own size when it is wider
+    (``keep_size``: up to cfg.max_width). Returns (pano, meta)."""
+    from holoflow.imageops.photo import keep_size
     from holoflow.imageops.resize import lanczos_resize
 
-    return lanczos_resize(pano, cfg.width, cfg.height), {"scale": round(cfg.width / pano.shape[1], 4)}
+    h, w = keep_size(pano.shape, cfg.width, cfg.height, cfg.max_width)
+    return lanczos_resize(pano, w, h), {"scale": round(w / pano.shape[1], 4)}
 
 
 def detail_classical(pano: np.ndarray, prompt: str, cfg: DetailParams, seed: int, device: str, progress):
-    """Wrap-aware Lanczos to cfg's size, then the guided-filter detail boost by cfg.strength. Returns
-    (pano, meta)."""
+    """Wrap-aware Lanczos to cfg's size (or the input's own when it is wider, ``keep_size``), then the
+    guided-filter detail boost by cfg.strength. Returns (pano, meta)."""
     from holoflow.imageops.detail import enhance_detail
+    from holoflow.imageops.photo import keep_size
     from holoflow.imageops.resize import lanczos_resize
 
-    if pano.shape[:2] != (cfg.height, cfg.width):
-        pano = lanczos_resize(pano, cfg.width, cfg.height)
+    h, w = keep_size(pano.shape, cfg.width, cfg.height, cfg.max_width)
+    if pano.shape[:2] != (h, w):
+        pano = lanczos_resize(pano, w, h)
     return enhance_detail(pano, cfg.strength), {"strength": cfg.strength}

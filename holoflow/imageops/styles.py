@@ -31,6 +31,15 @@ def style_from_prompt(prompt: str) -> str | None:
     return None
 
 
+def requested_style(prompt: str, style: str) -> str | None:
+    """The style a stage's ``style`` param asks for: auto = the prompt's first style word (None without
+    one), none = None, else the named style (checked)."""
+    name = style_from_prompt(prompt) if style == "auto" else None if style == "none" else style
+    if name is not None and name not in set(STYLE_WORDS.values()):
+        raise ValueError(f"unknown style {name!r}; use auto, none or one of {sorted(set(STYLE_WORDS.values()))}")
+    return name
+
+
 def stylize(rgb: np.ndarray, lines: np.ndarray, style: str) -> np.ndarray:
     """Apply ``style`` to a linear RGB panorama [H, W, 3] with its lineart [H, W] (1 = line) -> linear RGB."""
     fn = _STYLES.get(style)

@@ -1,0 +1,65 @@
+"""A user's photo stays their photo on its way to the detail panorama (issue 31): the real stages
+(stylize, upscale, detail) run through `holoflow run --use base_pano=PHOTO --until detail`."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from holoflow.imageops.photo import keep_size
+from holoflow.io.exr import read_exr, read_rgb
+from holoflow.io.image import read_panorama_image
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _photo(path: Path) -> Path:
+    """A 256 x 128 PNG with detail at every scale (noise over gradients): wider than the tiny profile's
+    128 px stages, so any resize or filter on the way would change its values."""
+    import cv2
+
+    rng = np.random.default_rng(7)
+    y, x = np.mgrid[0:128, 0:256]
+    img = np.stack([x, y * 2, (x + y) % 256], -1).astype(np.float64)
+    img = np.clip(0.6 * img + rng.normal(0, 40, img.shape), 0, 255).astype(np.uint8)
+    cv2.imwrite(str(path), img[..., ::-1])
+    return path
+
+
+def _detail(tmp_path: Path, prompt: str, *extra: str) -> tuple[np.ndarray, dict]:
+    cmd = [sys.executable, "-m", "holoflow", "run", prompt, "--pipeline", str(ROOT / "pipeline.yaml"),
+           "--profile", "tiny", "--store", str(tmp_path / "store"), "--json", "--until", "detail",
+           "--use", f"base_pano={_photo(tmp_path / 'photo.png')}", *extra]
+    done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    run = tmp_path / "store" / "runs" / json.loads(done.stdout)["run"]
+    return read_rgb(run / "detail" / "pano.exr"), read_exr(run / "detail" / "pano.exr")[1]
+
+
+def test_a_photo_without_a_style_reaches_detail_unchanged(tmp_path):
+    pano, attrs = _detail(tmp_path, "a room")
+    photo, _ = read_panorama_image(tmp_path / "photo.png")
+    assert pano.shape == photo.shape == (128, 256, 3)
+    np.testing.assert_array_equal(pano, photo.astype(np.float32))     # passed through: no arithmetic at all
+    assert attrs["holoflow.unaltered"] == 1 and attrs["holoflow.max_width"] == 4096
+    assert attrs["holoflow.source"].endswith("photo.png")
+
+
+def test_a_style_word_still_styles_the_photo_at_its_own_size(tmp_path):
+    pano, attrs = _detail(tmp_path, "a watercolor room")
+    photo, _ = read_panorama_image(tmp_path / "photo.png")
+    assert pano.shape == photo.shape
+    assert np.abs(pano - photo).mean() > 0.01
+    assert attrs["holoflow.unaltered"] == 0
+
+
+@pytest.mark.parametrize("shape, size, cap, want", [
+    ((1024, 2048), (1024, 512), 4096, (1024, 2048)),   # a photo wider than the stage keeps its size
+    ((1024, 2048), (1024, 512), 1536, (768, 1536)),    # ... up to the cap
+    ((256, 512), (2048, 1024), 4096, (1024, 2048)),    # a smaller input goes to the stage's size
+    ((1024, 2048), (1024, 512), 0, (1024, 2048)),      # 0 = no cap
+])
+def test_keep_size(shape, size, cap, want):
+    assert keep_size(shape, size[0], size[1], cap) == want
