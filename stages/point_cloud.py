@@ -1,6 +1,8 @@
 """point_cloud: equirect RGB-D -> the three point clouds of HoloDreamer (p0.ply, pf.ply, ps.ply).
 
-P0 at ``p0_width`` (paper: the depth resolution, 4096); P_f at ``pf_width`` (paper 2048) with the
+P0 at ``p0_width`` (paper: the depth resolution, 4096); P_f at ``pf_width`` (paper 2048; 0 = as fine as
+a ``view_size`` view resolves, capped at the panorama's width), sampled by area (``pf_sampling``:
+holoflow/geometry/area.py; pf.json records its angular spacing for the Gaussians' footprints), with the
 points whose relative depth gradient exceeds ``grad_threshold`` (paper 0.4) dropped (definition and
 units: holoflow/geometry/pointcloud.py, docs/conventions.md); P_s at ``ps_width`` (paper 1024), the
 cloud the PCD set is projected from. Sky (inf depth) goes on a far shell of radius ``sky_radius``
@@ -10,6 +12,9 @@ antialiased, depth point-sampled (no invented edge depths). PLY colours are 8-bi
 """
 from __future__ import annotations
 
+import json
+import math
+
 from holoflow.stage import Job, run_main
 
 
@@ -18,6 +23,7 @@ def main() -> int:
     import kornia
     import torch
 
+    from holoflow.geometry.area import equirect_to_area_points, view_width
     from holoflow.geometry.config import PointCloudParams
     from holoflow.geometry.pointcloud import (depth_gradient_mask, equirect_to_points, far_shell_radius,
                                               resample_rgbd, sky_to_shell)
@@ -25,9 +31,10 @@ def main() -> int:
     from holoflow.io.ply import write_points
 
     cfg = job.config(PointCloudParams)
-    widths = {"p0": cfg.p0_width, "pf": cfg.pf_width, "ps": cfg.ps_width}
     threshold, sky_radius = cfg.grad_threshold, cfg.sky_radius
     rgb = torch.from_numpy(read_rgb(job.input_file("pano", "pano.exr")))  # [H, W, 3] linear
+    pf_width = cfg.pf_width or min(rgb.shape[1], view_width(cfg.view_size, cfg.view_fov_deg))
+    widths = {"p0": cfg.p0_width, "pf": pf_width, "ps": cfg.ps_width}
     channels, attrs = read_exr(job.input_file("depth", "depth.exr"))
     if "Z" not in channels:
         raise ValueError(f"depth.exr has no Z channel (has {sorted(channels)})")
@@ -47,15 +54,18 @@ def main() -> int:
         if name == "pf":
             keep = depth_gradient_mask(d, threshold)
             d = torch.where(keep, d, torch.full_like(d, float("nan")))
-        xyz, c = equirect_to_points(col, d)
+        area = name == "pf" and cfg.pf_sampling == "area"
+        xyz, c = (equirect_to_area_points if area else equirect_to_points)(col, d)
         rgb8 = (c.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).numpy()
         write_points(job.output(f"{name}.ply"), xyz.float().numpy(), rgb8)
         counts[name] = int(xyz.shape[0])
         if name == "pf":
             counts["pf_dropped_fraction"] = round(float((~keep).double().mean()), 6)
         job.progress(i + 1, 3, "clouds")
-    job.meta(points=counts, sky_fraction=round(sky_fraction, 6), shell_radius=round(shell, 6),
-             grad_threshold=threshold, depth_size=list(depth.shape))
+    job.output("pf.json").write_text(json.dumps({"width": pf_width, "sampling": cfg.pf_sampling,
+                                                 "spacing_rad": 2 * math.pi / pf_width}, sort_keys=True))
+    job.meta(pf_width=pf_width, pf_sampling=cfg.pf_sampling, points=counts, sky_fraction=round(sky_fraction, 6),
+             shell_radius=round(shell, 6), grad_threshold=threshold, depth_size=list(depth.shape))
     print(f"point_cloud: {counts}, shell radius {shell:.3f} m, sky {100 * sky_fraction:.2f}%")
     return 0
 

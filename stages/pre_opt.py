@@ -10,7 +10,7 @@ def main() -> int:
     job.torch_threads(1)          # small tensors here; the numba kernels use job.cpus threads
     from holoflow.io.ply import read_points
     from holoflow.recon.config import PreOptParams
-    from holoflow.recon.schedule import pre_optimize, save_result
+    from holoflow.recon.schedule import cloud_footprint, pre_optimize, save_result
     from holoflow.recon.views import load_view_set
 
     cfg = job.config(PreOptParams)
@@ -18,7 +18,8 @@ def main() -> int:
     pcd_views, _ = load_view_set(job.input("pcd"), alpha_is_mask=True)
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
     model, log = pre_optimize(xyz, rgb, pcd_views, pano_views, cfg, job.engine, job.seed,
-                              progress=job.progress, device=job.device)
+                              progress=job.progress, device=job.device,
+                              footprint=cloud_footprint(job.input("cloud"), cfg))
     save_result(job, model, log, pano_views, "gaussians.ply")     # G0, its fit and train_log.json
     return 0
 

@@ -12,7 +12,7 @@ def main() -> int:
     from holoflow.io.ply import read_points
     from holoflow.recon.config import TransferOptParams
     from holoflow.recon.preview import write_previews
-    from holoflow.recon.schedule import save_result, transfer_optimize
+    from holoflow.recon.schedule import cloud_footprint, save_result, transfer_optimize
     from holoflow.recon.views import load_view_set
 
     cfg = job.config(TransferOptParams)
@@ -20,7 +20,8 @@ def main() -> int:
     pano_views, _ = load_view_set(job.input("pano"), alpha_is_mask=False)
     inp_views, _ = load_view_set(job.input("inp"), alpha_is_mask=False) if cfg.use_inp else ([], None)
     model, log = transfer_optimize(xyz, rgb, pano_views, inp_views, cfg, job.engine, job.seed,
-                                   progress=job.progress, device=job.device)
+                                   progress=job.progress, device=job.device,
+                                   footprint=cloud_footprint(job.input("cloud"), cfg))
     save_result(job, model, log, pano_views, "scene.ply")         # G1, its fit and train_log.json
     write_previews(model, job.output_dir / "previews", pano_views[0]["K"], job.engine, size=cfg.preview_size)
     return 0

@@ -15,7 +15,15 @@ class PointCloudParams(StageParams):
                       default="holoflow.geometry.pointcloud:equirect_to_points")
 
     p0_width: int = param(1024, "P0 at depth resolution", "px", ge=2)
-    pf_width: int = param(512, "P_f: downsampled, then depth-gradient filtered", "px", ge=2)
+    pf_width: int = param(0, "P_f: downsampled, then depth-gradient filtered; 0 = as fine as a view_size px "
+                          "view of view_fov_deg resolves (holoflow/geometry/area.py), capped at the "
+                          "panorama's own width", "px", ge=0)
+    pf_sampling: str = param("area", "P_f's points: area = rows thinned by cos(lat), so every point covers "
+                             "the same solid angle (no rings of thin Gaussians at the poles); grid = one "
+                             "per pixel (the paper)", choices=("area", "grid"))
+    view_size: int = param(512, "pf_width 0: the view size P_f must stay sharp at (paper 512)", "px", ge=1)
+    view_fov_deg: float = param(47.43, "pf_width 0: that view's field of view (paper 47.43)", "deg", gt=0,
+                                lt=180)
     ps_width: int = param(256, "P_s: for the PCD-set projection", "px", ge=2)
     grad_threshold: float = param(0.4, "P_f drops points whose relative depth gradient exceeds this "
                                   "(paper 0.4)", ge=0)

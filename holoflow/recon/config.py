@@ -17,7 +17,17 @@ _SPLAT_ENGINES = Engines("rasterize(..., backend=ENGINE): the rasterizer every t
 class OptimParams(StageParams):
     """What both optimisation schedules share (holoflow/recon/schedule.py)."""
 
-    init_opacity: float = param(0.5, "opacity of the Gaussians made from P_f (3DGS: 0.1)", gt=0, lt=1)
+    init_opacity: float = param(0.99, "opacity of the Gaussians made from P_f (3DGS: 0.1; footprint-sized "
+                                "Gaussians of a surface render the panorama as they start at 0.99)", gt=0, lt=1)
+    init_scale: str = param("footprint", "initial size and turn of the Gaussians: footprint = the pixel each "
+                            "point of P_f stands for (pf.json's angular spacing x its distance; a disc facing "
+                            "the centre, holoflow/geometry/area.py), knn = isotropic, RMS distance to the 3 "
+                            "nearest points (3DGS; also used when the cloud has no pf.json)",
+                            choices=("footprint", "knn"))
+    footprint_width: float = param(0.7, "init_scale footprint: standard deviation along the surface",
+                                   "fraction of the point's footprint", gt=0)
+    footprint_thickness: float = param(0.1, "init_scale footprint: standard deviation along the ray",
+                                       "fraction of the point's footprint", gt=0)
     densify_every: int = param(50, "split / clone every this many iterations (paper: 100)", "iters", ge=1)
     densify_from: int = param(40, "densify at densify_from < step <= densify_stop x iters (3DGS: from 500)",
                               "iters", ge=0)

@@ -27,19 +27,40 @@ TRAIN_SEED_STRIDE = 1_000_003   # train_seed k moves every phase's seed by k x t
 
 
 def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str = "cpu",
-               sh_degree: int = 0):
+               sh_degree: int = 0, footprint: tuple[float, float, float] | None = None):
     """Gaussians (SH degree ``sh_degree``, higher bands 0) at the points xyz [N, 3] metres, coloured
     rgb [N, 3] uint8 (sRGB), with
     initial ``opacity`` (a stage's ``init_opacity``; 3DGS: 0.1; a surface point cloud tolerates more,
-    which shortens training), on ``device``."""
+    which shortens training), on ``device``. ``footprint`` = (angular spacing of the cloud in
+    radians, width, thickness): each Gaussian covers its point's pixel
+    (holoflow.geometry.area.footprint_gaussians); None: the 3DGS nearest-neighbour size."""
     from holoflow.splat import GaussianModel
 
     if len(xyz) == 0:
         raise ValueError("the point cloud is empty: nothing to initialise Gaussians from")
     if not 0.0 < opacity < 1.0:
         raise ValueError(f"init_opacity must be in (0, 1), got {opacity}")
+    shape = {}
+    if footprint is not None:
+        from holoflow.geometry.area import footprint_gaussians
+
+        scales, quats = footprint_gaussians(torch.from_numpy(np.asarray(xyz, np.float64)), *footprint)
+        shape = dict(scales=scales, quats=quats)
     return GaussianModel.from_points(np.asarray(xyz, np.float32), np.asarray(rgb_u8, np.float32) / 255.0,
-                                     sh_degree=sh_degree, opacity=opacity).to(device)
+                                     sh_degree=sh_degree, opacity=opacity, **shape).to(device)
+
+
+def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple[float, float, float] | None:
+    """``init_model``'s footprint for the P_f of a point_cloud output folder: (its pf.json's angular
+    spacing, cfg.footprint_width, cfg.footprint_thickness), or None with ``init_scale: knn`` or no
+    pf.json (a cloud of the user's own)."""
+    import json
+    from pathlib import Path
+
+    path = Path(cloud_dir) / "pf.json"
+    if cfg.init_scale != "footprint" or not path.is_file():
+        return None
+    return float(json.loads(path.read_text())["spacing_rad"]), cfg.footprint_width, cfg.footprint_thickness
 
 
 def panorama_extent(xyz: np.ndarray) -> float:
@@ -120,10 +141,10 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], cfg: OptimParam
 
 def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pano_views: list[dict],
                  cfg: PreOptParams, backend: str, seed: int,
-                 progress: Progress = None, device: str = "cpu"):
-    """G0: init from P_f, ``cfg.pcd_iters`` on the PCD set (masked), then ``cfg.pano_iters`` on the PANO
-    set, trained on ``device``. Returns (model, log)."""
-    model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree)
+                 progress: Progress = None, device: str = "cpu", footprint=None):
+    """G0: init from P_f (``footprint``: ``init_model``'s), ``cfg.pcd_iters`` on the PCD set (masked),
+    then ``cfg.pano_iters`` on the PANO set, trained on ``device``. Returns (model, log)."""
+    model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree, footprint)
     log = run_phases(model, [("pcd", pcd_views, cfg.pcd_iters), ("pano", pano_views, cfg.pano_iters)], cfg,
                      backend, seed, progress, panorama_extent(xyz))
     return model, log
@@ -131,10 +152,11 @@ def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pan
 
 def transfer_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pano_views: list[dict], inp_views: list[dict],
                       cfg: TransferOptParams, backend: str, seed: int,
-                      progress: Progress = None, device: str = "cpu"):
-    """G1: fresh init from P_f, ``cfg.iters`` on PANO + INP sets together (INP left out when
-    ``cfg.use_inp`` is false: the paper's ablation), trained on ``device``. Returns (model, log)."""
-    model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree)
+                      progress: Progress = None, device: str = "cpu", footprint=None):
+    """G1: fresh init from P_f (``footprint``: ``init_model``'s), ``cfg.iters`` on PANO + INP sets
+    together (INP left out when ``cfg.use_inp`` is false: the paper's ablation), trained on
+    ``device``. Returns (model, log)."""
+    model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree, footprint)
     views = pano_views + (inp_views if cfg.use_inp else [])
     log = run_phases(model, [("pano+inp" if cfg.use_inp else "pano", views, cfg.iters)], cfg, backend, seed,
                      progress, panorama_extent(xyz))

@@ -50,10 +50,13 @@ class GaussianModel:
                              sh_degree=self.sh_degree)
 
     @classmethod
-    def from_points(cls, xyz, rgb, sh_degree: int = 0, opacity: float = 0.1) -> "GaussianModel":
+    def from_points(cls, xyz, rgb, sh_degree: int = 0, opacity: float = 0.1, scales=None, quats=None
+                    ) -> "GaussianModel":
         """Init from a coloured point cloud (3DGS recipe): xyz [N, 3] metres, rgb [N, 3] in [0, 1];
         isotropic scale = RMS distance to the 3 nearest neighbours (>= 1e-7 ** 0.5), identity
-        rotation, opacity 0.1, SH DC from rgb, higher SH bands zero."""
+        rotation, opacity 0.1, SH DC from rgb, higher SH bands zero. ``scales`` [N, 3] (metres) and
+        ``quats`` [N, 4] given together replace the neighbour scales and the identity rotation
+        (e.g. each point's pixel footprint, holoflow.geometry.area.footprint_gaussians)."""
         from scipy.spatial import cKDTree
 
         xyz = np.asarray(xyz, np.float64).reshape(-1, 3)
@@ -63,16 +66,20 @@ class GaussianModel:
         if not 0 <= sh_degree <= 3:
             raise ValueError(f"from_points: sh_degree {sh_degree} not in 0..3")
         n = len(xyz)
-        if n >= 2:
-            k = min(4, n)
-            dist, _ = cKDTree(xyz).query(xyz, k=k)                        # [N, k], column 0 = self
-            d2 = np.maximum((dist[:, 1:] ** 2).mean(1), 1e-7)
+        if (scales is None) != (quats is None):
+            raise ValueError("from_points: give scales and quats together")
+        if scales is not None:
+            log_scales = torch.log(torch.as_tensor(scales, dtype=torch.float64).reshape(n, 3).clamp_min(1e-12))
+            rot = torch.as_tensor(quats, dtype=torch.float64).reshape(n, 4)
         else:
             d2 = np.full(n, 1e-2)
+            if n >= 2:
+                dist, _ = cKDTree(xyz).query(xyz, k=min(4, n))                # [N, k], column 0 = self
+                d2 = np.maximum((dist[:, 1:] ** 2).mean(1), 1e-7)
+            log_scales = torch.from_numpy(np.repeat(0.5 * np.log(d2)[:, None], 3, 1))
+            rot = torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1)
         K = (sh_degree + 1) ** 2
-        return cls(means=torch.from_numpy(xyz),
-                   log_scales=torch.from_numpy(np.repeat(0.5 * np.log(d2)[:, None], 3, 1)),
-                   quats=torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1),
+        return cls(means=torch.from_numpy(xyz), log_scales=log_scales, quats=rot,
                    opacity_logits=torch.full((n,), float(np.log(opacity / (1 - opacity)))),
                    sh_dc=torch.from_numpy((rgb - 0.5) / SH_C0)[:, None, :],
                    sh_rest=torch.zeros(n, K - 1, 3), sh_degree=sh_degree)
