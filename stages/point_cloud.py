@@ -1,7 +1,7 @@
 """point_cloud: equirect RGB-D -> the three point clouds of HoloDreamer (p0.ply, pf.ply, ps.ply).
 
 P0 at ``p0_width`` (paper: the depth resolution, 4096); P_f at ``pf_width`` (paper 2048; 0 = as fine as
-a ``view_size`` view resolves, capped at the panorama's width), sampled by area (``pf_sampling``:
+a ``view_size`` view resolves, capped at the panorama's width and ``pf_max_width``), sampled by area (``pf_sampling``:
 holoflow/geometry/area.py; pf.json records its angular spacing for the Gaussians' footprints), with the
 points whose relative depth gradient exceeds ``grad_threshold`` (paper 0.4) dropped (definition and
 units: holoflow/geometry/pointcloud.py, docs/conventions.md); P_s at ``ps_width`` (paper 1024), the
@@ -33,7 +33,7 @@ def main() -> int:
     cfg = job.config(PointCloudParams)
     threshold, sky_radius = cfg.grad_threshold, cfg.sky_radius
     rgb = torch.from_numpy(read_rgb(job.input_file("pano", "pano.exr")))  # [H, W, 3] linear
-    pf_width = cfg.pf_width or min(rgb.shape[1], view_width(cfg.view_size, cfg.view_fov_deg))
+    pf_width = cfg.pf_width or min(rgb.shape[1], view_width(cfg.view_size, cfg.view_fov_deg), cfg.pf_max_width)
     widths = {"p0": cfg.p0_width, "pf": pf_width, "ps": cfg.ps_width}
     channels, attrs = read_exr(job.input_file("depth", "depth.exr"))
     if "Z" not in channels:

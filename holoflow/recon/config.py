@@ -50,9 +50,9 @@ class PreOptParams(OptimParams):
 
     ENGINES = _SPLAT_ENGINES
 
-    pcd_iters: int = param(60, "phase 1: PCD set, loss masked to pixels a point landed on (paper 2000)",
+    pcd_iters: int = param(10, "phase 1: PCD set, loss masked to pixels a point landed on (paper 2000)",
                            "iters", ge=0)
-    pano_iters: int = param(60, "phase 2: PANO set (paper 2000)", "iters", ge=0)
+    pano_iters: int = param(10, "phase 2: PANO set (paper 2000)", "iters", ge=0)
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ class TransferOptParams(OptimParams):
 
     ENGINES = _SPLAT_ENGINES
 
-    iters: int = param(150, "PANO + INP sets (paper 5000 = 1.25 x pre_opt's 2000 + 2000; every profile "
+    iters: int = param(25, "PANO + INP sets (paper 5000 = 1.25 x pre_opt's 2000 + 2000; every profile "
                        "keeps 1.25x)", "iters", ge=0)
     use_inp: bool = param(True, "false = transfer on the PANO set only (the paper's ablation)")
     preview_size: int = param(96, "side of the look-around preview renders", "px", ge=1)

@@ -116,4 +116,4 @@ def test_param_classes_and_the_params_command_import_no_heavy_library():
             "print('HEAVY', bad)")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
-    assert "HEAVY []" in out.stdout and "pcd_iters            int    60" in out.stdout
+    assert "HEAVY []" in out.stdout and "pcd_iters            int    10" in out.stdout
