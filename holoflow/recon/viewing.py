@@ -72,9 +72,13 @@ def view_intrinsics(size: int, fov_deg: float) -> torch.Tensor:
 def polar_cameras(viewmats: torch.Tensor, pole_deg: float) -> torch.Tensor:
     """[C] bool: the camera's view axis (world, the viewmat's third row) lies within ``pole_deg``
     degrees of the zenith (-y) or the nadir (+y)."""
-    axis = viewmats[:, 2, :3].double()                                           # [C, 3]
-    axis = axis / axis.norm(dim=1, keepdim=True)
-    return axis[:, 1].abs() >= math.cos(math.radians(pole_deg))
+    return elevation_deg(viewmats).abs() >= 90.0 - pole_deg
+
+
+def elevation_deg(viewmats: torch.Tensor) -> torch.Tensor:
+    """[C] degrees of each camera's view axis above the horizon (+90 = zenith; world +y is down)."""
+    axis = viewmats[:, 2, :3].double()
+    return torch.rad2deg(torch.asin((-axis[:, 1] / axis.norm(dim=1)).clamp(-1, 1)))
 
 
 def source_views(pano: torch.Tensor, viewmats: torch.Tensor, K: torch.Tensor, size: int,
@@ -321,6 +325,7 @@ def score_run(run_dir: Path, run_info: dict, spec: ViewingSpec = ViewingSpec(),
     t["render_base"] = time.monotonic() - t0
     t0 = time.monotonic()
     base = base_scores(renders, sources, polar)
+    base["elevation_deg"] = [round(float(e), 3) for e in elevation_deg(vm)]
     t["psnr_ssim"] = time.monotonic() - t0
     t0 = time.monotonic()
     pick = nr_pick(polar, spec.nr_cameras, spec.seed)
@@ -374,6 +379,7 @@ def table(scores: dict, profile: str | None) -> list[str]:
         rows.append(f"  {label:42s}{v:>10s}   {gt:>10s}   {_ok(value, goal, at_most)}".rstrip())
 
     row(f"base PSNR dB ({b['cameras']} cameras)", b["psnr"], "{:.2f}", g.get("psnr"))
+    row("base PSNR dB, pooled MSE", b.get("psnr_pooled"), "{:.2f}")
     row("base SSIM", b["ssim"], "{:.4f}")
     for key in ("niqe", "brisque"):
         r = nr.get(key)
@@ -395,7 +401,8 @@ def table(scores: dict, profile: str | None) -> list[str]:
     head = [f"viewing size {s['size']} px, {s['fov_deg']} deg horizontal field of view; source: {scores['source']}; "
             f"{scores['gaussians']} Gaussians",
             f"  {'':42s}{'measured':>10s}   goal ({name})"]
-    foot = [f"PSNR / SSIM: means over the base cameras more than {s['pole_deg']} deg from the poles (sRGB); "
+    foot = [f"PSNR / SSIM: means of the per-camera values over the base cameras more than {s['pole_deg']} deg from "
+            "the poles (sRGB; pooled: the PSNR of their pooled squared error, which easy flat views do not lift); "
             f"zenith/nadir: the cameras within {s['pole_deg']} deg of them. NIQE / BRISQUE (lower is better): means "
             f"over {nr.get('cameras', 0)} of those cameras, render / source. Empty: alpha < {s['empty_alpha']}; "
             f"novel eyes move horizontally (<= {s['wall_margin']} m short of the run's depth), seed {s['seed']}.",
