@@ -39,9 +39,9 @@ def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str
         sections.append(page.stage_section(s, figs, notes, metrics))
     scene = run.run_dir / "transfer_opt" / "scene.ply"
     if view_size > 0 and scene.is_file():
+        from holoflow.flow.store import read_json
         from holoflow.recon.viewing import ViewingSpec, score_run
         from holoflow.report.viewing import section_html
-        from holoflow.store import read_json
 
         info = read_json(run.run_dir / "run.json") or {}
         scores, pictures = score_run(run.run_dir, info, ViewingSpec(size=view_size))
