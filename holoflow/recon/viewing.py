@@ -14,7 +14,7 @@ The paper's Table II protocol taken where a viewer looks, not at the training si
   ``pole_deg`` from both poles; the polar cameras (within ``pole_deg`` of the zenith or nadir) are
   scored on their own, with their mean PSNR's gap below the others' mean (``polar_gap_db``, > 0 =
   worse).
-- **nr**: NIQE and BRISQUE (holoflow.nriqa, lower = better) of the renders and of the source's own
+- **nr**: NIQE and BRISQUE (holoflow.quality.nriqa, lower = better) of the renders and of the source's own
   views at a seeded subset of ``nr_cameras`` non-polar cameras (0 = all), and their ratio
   render / source (a photo has its own score; 1.0 = as natural as the source).
 - **novel**: ``per_distance`` cameras at each distance of ``distances`` metres off the centre
@@ -117,7 +117,7 @@ def per_camera_psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 def per_camera_ssim(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """SSIM (holoflow.metrics) of each image pair [C, H, W, 3]: [C] float64."""
+    """SSIM (holoflow.quality.metrics) of each image pair [C, H, W, 3]: [C] float64."""
     from holoflow.quality import metrics
 
     return torch.tensor([metrics.ssim(p, t) for p, t in zip(pred, target)], dtype=torch.float64)

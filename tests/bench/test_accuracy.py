@@ -55,8 +55,8 @@ def test_quick_sweep_reuses_upstream_and_resumes(tmp_path):
 def test_profiles_skip_what_the_pipeline_lacks_and_say_why():
     import torch
 
-    from holoflow import pipeline
     from holoflow.bench import profiles
+    from holoflow.flow import pipeline
 
     pipe = pipeline.load(profiles.ROOT / "pipeline.yaml")
     assert "not defined in pipeline.yaml" in profiles.unavailable(pipe, "no-such-profile")
