@@ -32,11 +32,14 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES
+
 PROMPT = "a cozy wooden cabin at night"
 NEUTRAL = ["stylize.style=none", "detail.strength=0.0"]     # truth applies (the eval profile's choice)
 STAGES = ["base_pano", "stylize", "upscale", "detail", "tangent_depth", "metric_align", "point_cloud",
           "pano_set", "pcd_set", "pre_opt", "inp_set", "transfer_opt"]
 SPLAT = ("pre_opt", "inp_set", "transfer_opt")
+STORE = Path("/tmp/holoflow-bench-accuracy/store")
 
 
 @dataclass(frozen=True)
@@ -449,7 +452,7 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(prog="holoflow bench accuracy", description=__doc__.split("\n\n")[0])
     ap.add_argument("--prompt", default=PROMPT, help="procedural scene")
-    ap.add_argument("--store", type=Path, default=Path("/tmp/holoflow-bench-accuracy/store"),
+    ap.add_argument("--store", type=Path, default=STORE,
                     help="shared store of the sweep (the same store again resumes / reuses)")
     ap.add_argument("--points", default="all", help="comma list of point names (default all)")
     ap.add_argument("--set", dest="sets", action="append", default=[], help="stage.param=value for every point")
@@ -470,7 +473,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pictures", type=Path, default=None,
                     help="folder for pictures of the first point's artifacts (accuracy-base-*.png)")
     ap.add_argument("--quick", action="store_true", help="three tiny points (tests)")
+    ap.add_argument("--profiles", default=None,
+                    help="comma list of profiles (e.g. preview,quality,paper): instead of the knob sweep, run each "
+                         "on --scenes and --photos and score it at the viewing size (holoflow.bench.profiles); "
+                         "a profile the pipeline lacks or that needs a GPU / weights absent here is skipped")
+    ap.add_argument("--scenes", default=";".join(SCENES), help="--profiles: procedural prompts, ';'-separated")
+    ap.add_argument("--photos", default=str(PHOTOS),
+                    help="--profiles: folder of 360 photos, each run as --use base_pano=PHOTO ('' = none)")
+    ap.add_argument("--photo-prompt", default=PHOTO_PROMPT, help="--profiles: the prompt of the photo runs")
+    ap.add_argument("--size", type=int, default=512, help="--profiles: viewing size, px")
+    ap.add_argument("--fov", type=float, default=47.43, help="--profiles: viewing field of view, deg")
+    ap.add_argument("--nr-cameras", type=int, default=12, help="--profiles: cameras NIQE / BRISQUE are taken at")
+    ap.add_argument("--doc", type=Path, default=None,
+                    help="--profiles: markdown file whose generated block (between markers) gets the table")
     args = ap.parse_args(argv)
+    if args.profiles:
+        from holoflow.bench import profiles
+
+        args.store = args.store if args.store != STORE else STORE.with_name("store-profiles")
+        if args.pictures is None and args.doc:
+            args.pictures = args.doc.parent / "images"
+        return profiles.main(args)
     if args.quick:
         args.novel, args.novel_size = min(args.novel, 2), min(args.novel_size, 16)
     points = quick_points() if args.quick else full_points()

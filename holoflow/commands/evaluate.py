@@ -15,8 +15,10 @@ true appearance up to resampling) and scores G0 (pre_opt) and G1 (transfer_opt):
   approximated).
 
 ``--run RUN`` (a run id or ``latest``) scores any finished run, procedural or a user's own panorama
-(``holoflow run ... --use base_pano=photo.jpg``): the truth-free part of the paper's protocol only
-(base-camera PSNR / SSIM against the PANO set, NIQE / BRISQUE at the supplementary cameras).
+(``holoflow run ... --use base_pano=photo.jpg``), at the viewing size (default 512 px at the paper's
+47.43 deg; holoflow.recon.viewing): the final scene at the base cameras against the source's own
+views (the photo itself for a photo), the zenith / nadir cameras apart, NIQE / BRISQUE ratios render /
+source, and the empty fraction of novel cameras 0.25 / 0.5 / 1 m off centre, beside issue 31's goals.
 
 Every report names the engines that made the depth (``depth_engines``): on procedural scenes that is
 the ``simulated`` engine, which reads the scene's true depth, so no figure here is a learned
@@ -37,8 +39,8 @@ import time
 from pathlib import Path
 
 from holoflow.evaluation.machine import machine
-from holoflow.evaluation.runs import open_store, run_pipeline
-from holoflow.evaluation.scores import evaluate_nr, evaluate_run, strip_image
+from holoflow.evaluation.runs import depth_engines, open_store, run_pipeline
+from holoflow.evaluation.scores import evaluate_run, strip_image
 from holoflow.evaluation.tables import PAPER_TABLE2, PAPER_TABLE3, VARIANTS, _fmt, markdown, mean_tree, picture_name
 
 
@@ -66,9 +68,14 @@ def main(argv: list[str] | None = None) -> int:
                         "NIQE needs >= 192; 0 = skip)")
     p.add_argument("--run", default=None,
                    help="score a finished run of the store (id or 'latest'; any base panorama, a photo given "
-                        "by --use included) without truth: base PSNR / SSIM vs the PANO set and NIQE / BRISQUE "
-                        "at the supplementary cameras, printed; no pipeline is run, prompts / --variants / "
-                        "--out / --images are not used")
+                        "by --use included) at the viewing size (--size, --fov): base cameras vs the source's "
+                        "own views (the photo itself for --use base_pano=FILE), zenith / nadir, NIQE / BRISQUE "
+                        "ratios, novel cameras' empty fraction, printed with the goals; no pipeline is run, "
+                        "prompts / --variants / --out / --images / --supp / --nr-size are not used")
+    p.add_argument("--size", type=int, default=512, help="--run: viewing size, px square (paper 512)")
+    p.add_argument("--fov", type=float, default=47.43, help="--run: horizontal field of view, deg (paper 47.43)")
+    p.add_argument("--nr-cameras", type=int, default=12,
+                   help="--run: NIQE / BRISQUE at this many seeded non-polar base cameras (0 = all)")
     p.add_argument("--out", type=Path, default=Path("docs/eval.md"), help="markdown report")
     p.add_argument("--json", type=Path, default=None, help="also write every number as JSON")
     p.add_argument("--images", type=Path, default=None,
@@ -129,9 +136,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def main_run(args) -> int:
-    """``holoflow eval --run RUN``: print the truth-free scores of one finished run beside the
-    paper's Table II values (and with --json write every number)."""
-    from holoflow.quality import metrics
+    """``holoflow eval --run RUN``: score one finished run at the viewing size (holoflow.recon.viewing:
+    base cameras vs the source's own views, zenith / nadir, NIQE / BRISQUE ratios, novel cameras'
+    empty fraction), print the table with issue 31's goals (and with --json write every number)."""
+    from holoflow.recon.viewing import ViewingSpec, score_run, table
 
     st = open_store(args.store)
     run_id = st.latest_run_id() if args.run == "latest" else args.run
@@ -141,20 +149,16 @@ def main_run(args) -> int:
               f"runs there: {', '.join(st.run_ids()[-5:]) or 'none'}", file=sys.stderr)
         return 2
     t0 = time.monotonic()
-    r = evaluate_nr(run_dir, args.supp, args.seed, args.backend, args.nr_size)
     info = st.run_info(run_id) or {}
-    r.update(run=run_id, prompt=info.get("prompt"), profile=info.get("profile"), seconds=time.monotonic() - t0,
-             availability=metrics.availability(), paper=dict(table2=PAPER_TABLE2))
-    t2 = PAPER_TABLE2
+    spec = ViewingSpec(size=args.size, fov_deg=args.fov, nr_cameras=args.nr_cameras, seed=args.seed,
+                       backend=args.backend)
+    r, _ = score_run(run_dir, info, spec)
+    r.update(run=run_id, prompt=info.get("prompt"), profile=info.get("profile"), engines=depth_engines(run_dir),
+             seconds_total=time.monotonic() - t0)
     print(f"run {run_id} ({info.get('profile')}), depth made by: "
           + ", ".join(f"{k}={v}" for k, v in r["engines"].items()))
-    print(f"{'':8s}{'base PSNR':>10s}{'base SSIM':>10s}{'supp NIQE':>10s}{'BRISQUE':>10s}")
-    for tag in ("G0", "G1"):
-        b, n = r[tag]["base"], r[tag].get("supp_nr", {})
-        print(f"{tag:8s}" + "".join(f"{_fmt(x):>10s}" for x in (b["psnr"], b["ssim"], n.get("niqe"), n.get("brisque"))))
-    print(f"{'paper':8s}" + "".join(f"{x:>10}" for x in (t2["psnr"], t2["ssim"], t2["niqe"], t2["brisque"])))
-    print(f"NIQE / BRISQUE: means over {r['G1'].get('supp_nr', {}).get('cameras', 0)} supplementary cameras "
-          f"rendered at {args.nr_size} px; paper = its Table II (Ours); lower is better for both")
+    print("\n".join(table(r, info.get("profile"))))
+    print(f"scored in {r['seconds_total']:.1f} s")
     if args.json:
         args.json.write_text(json.dumps(r, indent=1, sort_keys=True))
     return 0

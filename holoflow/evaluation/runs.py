@@ -44,8 +44,10 @@ def open_store(store: Path | None) -> "Store":
     return Store(store or os.environ.get("HOLOFLOW_STORE") or (Path(HOLOFLOW_ROOT) / "artifacts"))
 
 
-def run_pipeline(prompt: str, profile: str, sets: list[str], store: Path | None) -> tuple[Path, dict]:
-    """Run (or reuse from the cache) the pipeline for ``prompt``; returns (run folder, summary)."""
+def run_pipeline(prompt: str, profile: str, sets: list[str], store: Path | None, uses: list[str] = ()
+                 ) -> tuple[Path, dict]:
+    """Run (or reuse from the cache) the pipeline for ``prompt`` (``uses``: STAGE=PATH as ``--use``);
+    returns (run folder, summary)."""
     import io
 
     from holoflow.flow import pipeline
@@ -56,7 +58,7 @@ def run_pipeline(prompt: str, profile: str, sets: list[str], store: Path | None)
 
     pipe = pipeline.load(Path(HOLOFLOW_ROOT) / "pipeline.yaml")
     st = open_store(store)
-    opts = Options(prompt=prompt, profile=profile, sets=list(sets))
+    opts = Options(prompt=prompt, profile=profile, sets=list(sets), uses=list(uses))
     ctx = Context.build(pipe, st, opts)
     prepare([BatchItem(ctx, opts)], None)
     summary = run(ctx, opts, make_display(io.StringIO(), fancy=False))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from holoflow.evaluation.cameras import (Views, base_views, hidden_masks, novel_cameras, pano_views, square_K,
+from holoflow.evaluation.cameras import (Views, base_views, hidden_masks, novel_cameras, square_K,
                                          supp_cameras, true_views)
 from holoflow.evaluation.runs import depth_engines
 
@@ -92,16 +92,6 @@ def evaluate_run(run_dir: Path, novel: int, offset: float, supp: int, seed: int,
     result["engines"] = depth_engines(run_dir)
     result["_renders"] = {"truth": views["novel"].targets, "hidden": views["novel"].hidden,
                           **{tag: r["novel"] for tag, r in renders.items()}}
-    return result
-
-
-def evaluate_nr(run_dir: Path, supp: int, seed: int, backend: str, nr_size: int) -> dict:
-    """Truth-free scores of a finished run (a user's own panorama included): per model G0 / G1, base
-    PSNR / SSIM / empty against the PANO set and ``supp_nr`` (NIQE / BRISQUE at ``supp`` seeded
-    supplementary cameras, ``nr_size`` px; 0 = skip), plus the engines that made the depth."""
-    nr = (*supp_cameras(run_dir, supp, seed), nr_size) if nr_size else None
-    result, _ = score_models(run_dir, {"base": pano_views(run_dir)}, backend, nr)
-    result["engines"] = depth_engines(run_dir)
     return result
 
 

@@ -17,8 +17,9 @@ from typing import Any
 from holoflow.report.runinfo import ReportError, RunInfo, collect
 
 
-def build(run: RunInfo, render_clouds: bool = True) -> str:
-    """The report page of ``run`` as HTML text."""
+def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str:
+    """The report page of ``run`` as HTML text; with ``view_size`` > 0 and a final scene, a first
+    section scores it at that viewing size (holoflow.report.viewing)."""
     from holoflow.report import clouds as cl
     from holoflow.report import figures as fg
     from holoflow.report import page
@@ -36,6 +37,15 @@ def build(run: RunInfo, render_clouds: bool = True) -> str:
             run_metrics.update({f"{s.name}: {k}": v for k, v in fg.scalars(s.record.get("meta", {})).items()
                                 if isinstance(v, (int, float)) and not isinstance(v, bool)})
         sections.append(page.stage_section(s, figs, notes, metrics))
+    scene = run.run_dir / "transfer_opt" / "scene.ply"
+    if view_size > 0 and scene.is_file():
+        from holoflow.flow.store import read_json
+        from holoflow.recon.viewing import ViewingSpec, score_run
+        from holoflow.report.viewing import section_html
+
+        info = read_json(run.run_dir / "run.json") or {}
+        scores, pictures = score_run(run.run_dir, info, ViewingSpec(size=view_size))
+        sections.insert(0, section_html(scores, pictures, run.meta.get("profile")))
     footer = (f"made by holoflow report at {time.strftime('%Y-%m-%d %H:%M:%S %Z')}; point clouds: {renderer}, "
               f"cut away above the panorama centre, seen from above")
     return page.document(run, sections, run_metrics, footer)
@@ -68,6 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--store", help="store folder (default $HOLOFLOW_STORE, else artifacts/ beside the pipeline)")
     p.add_argument("-o", "--output", type=Path, help="HTML file to write (default ./report-<run id>.html)")
     p.add_argument("--no-clouds", action="store_true", help="skip the point-cloud pictures (faster)")
+    p.add_argument("--view-size", type=int, default=512,
+                   help="score the final scene at this viewing size, px (holoflow eval --run's table, source | "
+                        "render crops and novel views; 0 = skip)")
     p.add_argument("--screenshot", type=Path, metavar="PNG",
                    help="also screenshot the page with headless Chromium (1280 px wide)")
     p.add_argument("--screenshot-height", type=int, default=2400, help="screenshot height, CSS pixels")
@@ -81,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         order = _stage_order(path)
         run = collect(store, args.run, order)
-        html = build(run, render_clouds=not args.no_clouds)
+        html = build(run, render_clouds=not args.no_clouds, view_size=args.view_size)
     except ReportError as e:
         print(f"holoflow report: error: {e}", file=sys.stderr)
         return 2

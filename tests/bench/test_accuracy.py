@@ -50,3 +50,62 @@ def test_quick_sweep_reuses_upstream_and_resumes(tmp_path):
     again = list(csv.DictReader(open(out)))
     assert [r["ran"] for r in again] == ["", ""]
     assert [r["g1_novel_psnr"] for r in again] == [r["g1_novel_psnr"] for r in rows]
+
+
+def test_profiles_skip_what_the_pipeline_lacks_and_say_why():
+    import torch
+
+    from holoflow.bench import profiles
+    from holoflow.flow import pipeline
+
+    pipe = pipeline.load(profiles.ROOT / "pipeline.yaml")
+    assert "not defined in pipeline.yaml" in profiles.unavailable(pipe, "no-such-profile")
+    assert profiles.unavailable(pipe, "tiny") is None and profiles.unavailable(pipe, "preview") is None
+    if not torch.cuda.is_available():
+        assert "need a GPU" in profiles.unavailable(pipe, "paper")
+
+
+def test_profiles_block_replaces_only_its_own_markers():
+    from holoflow.bench import profiles
+
+    doc = f"# title\n\nintro\n\n{profiles.BEGIN}\nold\n{profiles.END}\n\n## after\n"
+    new = profiles.replace_block(doc, f"{profiles.BEGIN}\nnew\n{profiles.END}\n")
+    assert new == f"# title\n\nintro\n\n{profiles.BEGIN}\nnew\n{profiles.END}\n\n## after\n"
+    assert profiles.replace_block("# t\n", "B\n") == "# t\n\nB\n"
+
+
+def test_profiles_measure_a_photo_at_the_viewing_size(tmp_path):
+    """`bench accuracy --profiles tiny,nosuch` on a folder with one small photo: the photo is run with
+    --use base_pano, scored against itself at 192 px, timed from the run records; nosuch is skipped
+    with a line; the doc keeps its text outside the markers and links the pictures."""
+    import json
+
+    import numpy as np
+    import OpenImageIO as oiio
+
+    from holoflow.bench import profiles
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    x = np.linspace(0, 1, 128)[None, :, None] * np.linspace(0.2, 1, 64)[:, None, None] * np.array([1.0, 0.6, 0.3])
+    out = oiio.ImageOutput.create(str(photos / "room.png"))
+    out.open(str(photos / "room.png"), oiio.ImageSpec(128, 64, 3, "uint8"))
+    out.write_image((x * 255).astype(np.uint8))
+    out.close()
+    doc = tmp_path / "docs" / "acc.md"
+    doc.parent.mkdir()
+    doc.write_text("# kept\n")
+    argv = ["--profiles", "tiny,nosuch", "--scenes", "", "--photos", str(photos), "--size", "192", "--nr-cameras",
+            "2", "--store", str(tmp_path / "store"), "--doc", str(doc), "--json", str(tmp_path / "p.json")]
+    assert acc.main(argv) == 0
+    r = json.loads((tmp_path / "p.json").read_text())
+    assert r["skipped"][0].startswith("nosuch: profile 'nosuch' is not defined")
+    (run,) = r["runs"]
+    row, scores = run["row"], run["scores"]
+    assert (row["case"], row["kind"], row["profile"]) == ("room", "photo", "tiny")
+    assert scores["source"] == "photo room.png (128x64)" and scores["spec"]["size"] == 192
+    assert row["wall_s"] > 0 and row["cpu_s"] > 0 and math.isfinite(row["psnr"]) and 0 <= row["empty_0.5"] <= 1
+    text = doc.read_text()
+    assert text.startswith("# kept\n") and profiles.BEGIN in text and "| room | tiny |" in text
+    assert "- skipped: nosuch" in text and "(images/viewing-room-tiny-base.jpg)" in text
+    assert (doc.parent / "images" / "viewing-room-tiny-novel.jpg").stat().st_size > 1000

@@ -68,22 +68,28 @@ def test_exports_are_written_and_render_like_the_scene(two_runs):
         assert p_set > p_ply - 0.5, (name, p_set, p_ply)
 
 
-def test_eval_run_gives_truth_free_scores_of_the_finished_run(two_runs, tmp_path):
-    """`holoflow eval --run latest`: base PSNR / SSIM against the PANO set and finite NIQE / BRISQUE
-    at the supplementary cameras for G0 and G1, the depth engines, the paper's values beside."""
+def test_eval_run_prints_the_viewing_size_table(two_runs, tmp_path):
+    """`holoflow eval --run latest --size 192`: the scene at the run's base cameras against the detail
+    panorama's own views at 192 px, the poles apart, NIQE / BRISQUE ratios, the novel cameras' empty
+    fraction and (a procedural scene) their PSNR against truth, each beside its goal."""
     store, _, _ = two_runs
-    out = tmp_path / "nr.json"
-    cmd = [sys.executable, "-m", "holoflow", "eval", "--run", "latest", "--store", str(store), "--supp", "3",
-           "--nr-size", "192", "--json", str(out)]
+    out = tmp_path / "view.json"
+    cmd = [sys.executable, "-m", "holoflow", "eval", "--run", "latest", "--store", str(store), "--size", "192",
+           "--nr-cameras", "2", "--json", str(out)]
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     r = json.loads(out.read_text())
     assert r["run"] == (store / "latest").readlink().name and r["engines"]["tangent_depth"] == "auto -> simulated"
-    for tag in ("G0", "G1"):
-        nr = r[tag]["supp_nr"]
-        assert (nr["cameras"], nr["size"]) == (3, 192)
-        assert all(np.isfinite(v) for v in (nr["niqe"], nr["brisque"], r[tag]["base"]["psnr"], r[tag]["base"]["ssim"]))
-    assert "5.372" in done.stdout and "32.372" in done.stdout and "tangent_depth=auto -> simulated" in done.stdout
+    b = r["base"]
+    assert (b["cameras"], b["polar_cameras"]) == (10, 2)          # the tiny rig: 12 cameras, only the poles polar
+    assert all(np.isfinite(v) for v in (b["psnr"], b["ssim"], b["polar_psnr"], r["nr"]["niqe"]["ratio"],
+                                        r["nr"]["brisque"]["ratio"]))
+    assert sorted(r["novel"]) == ["0.25", "0.5", "1"] and all(0 <= n["empty"] <= 1 for n in r["novel"].values())
+    assert all(np.isfinite(n["psnr"]) for n in r["novel"].values())    # procedural: truth exists
+    assert r["source"].startswith("detail panorama")
+    for text in ("base PSNR dB (10 cameras)", ">= 32.00", "BRISQUE render / source", "zenith/nadir gap",
+                 "novel 0.5 m empty %", "<= 0.50 %", "goal (preview)", "tangent_depth=auto -> simulated"):
+        assert text in done.stdout, text
     bad = subprocess.run(cmd[:5] + ["no-such-run", "--store", str(store)], cwd=ROOT, capture_output=True, text=True,
                          timeout=600)
     assert bad.returncode == 2 and "no finished run 'no-such-run'" in bad.stderr

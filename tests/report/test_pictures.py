@@ -68,3 +68,27 @@ def test_moving_mean_matches_a_loop():
     y = [3.0, 1.0, 4.0, 1.0, 5.0, 9.0, 2.0]
     ref = [sum(y[i:i + 3]) / 3 for i in range(len(y) - 2)]
     assert np.allclose(figures.moving_mean(y, 3), ref)
+
+
+def test_viewing_pictures_pick_the_worst_median_zenith_and_nadir():
+    import torch
+
+    from holoflow.report import viewing
+
+    scores = {"base": {"per_camera_psnr": [20.0, 30.0, 25.0, 28.0, 22.0, 18.0],
+                       "polar": [True, False, False, False, False, True],
+                       "elevation_deg": [90.0, 40.0, 10.0, -10.0, -40.0, -90.0]},
+              "spec": {"size": 32, "empty_alpha": 0.5}, "source": "photo x.jpg",
+              "novel": {"0.5": {"cameras": 2, "empty": 0.25, "offset_m": 0.5}}}
+    assert viewing.pick_base(scores) == [(4, "lowest PSNR"), (3, "median PSNR"), (0, "zenith"), (5, "nadir")]
+    g = torch.Generator().manual_seed(0)
+    pics = {"source": torch.rand(6, 32, 32, 3, generator=g), "render": torch.rand(6, 32, 32, 3, generator=g)}
+    img, cap = viewing.base_picture(scores, pics, side=16)
+    assert img.shape == (4 * 16 + 3 * viewing.GAP, 2 * 16 + viewing.GAP, 3) and "camera 4 (lowest PSNR" in cap
+    src = (pics["source"][3].numpy() * 255 + 0.5).astype(np.uint8)
+    assert np.array_equal(img[16 + viewing.GAP:32 + viewing.GAP, :16], src[8:24, 8:24])   # row 2: camera 3, centre crop
+    alpha = torch.ones(2, 32, 32)
+    alpha[1, :8] = 0.0
+    img, cap = viewing.novel_picture(scores, dict(novel=torch.full((2, 32, 32, 3), 0.5), novel_alpha=alpha), side=32)
+    assert (img[:8, 32 + viewing.GAP:64 + viewing.GAP] == viewing.EMPTY_RGB).all() and "25.00 %" in cap
+    assert (img[8:, 32 + viewing.GAP:64 + viewing.GAP] == 128).all()

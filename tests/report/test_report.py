@@ -86,6 +86,8 @@ def test_full_run_report(runs, tmp_path):
         assert cloud in titles
     assert titles.count("train_log.json: loss") == 2 and titles.count("train_log.json: Gaussians") == 2
     assert "previews/look_around.png" in titles
+    assert '<h2 id="viewing">what people see (512 px)</h2>' in html and "base PSNR dB (10 cameras)" in html
+    assert "base cameras at 512 px" in titles and "novel cameras 0.5 m off centre" in titles
     assert "not run" not in re.sub(r"<script>.*</script>", "", html, flags=re.S).split("<h2>stages")[1].split(
         "<h2>metrics")[0]
     record = json.loads((store / "keys" / f"{_key(store, full, 'transfer_opt')}.json").read_text())
