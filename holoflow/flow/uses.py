@@ -92,8 +92,10 @@ def _import_exr(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     from ..io.validate import InputRefused, check_exr
     from .store import sha256_file
 
+    s = ctx.pipe.stages[stage]
+    equirect = s.config is not None and s.config.__module__.startswith("holoflow.")   # holoflow's own EXR stages
     try:
-        channels, attrs, facts = check_exr(src)
+        channels, attrs, facts = check_exr(src, equirect)
     except InputRefused as e:
         raise PipelineError(f"--use {stage}: {e}") from None
     if channels is None:

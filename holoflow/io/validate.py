@@ -118,10 +118,11 @@ def check_equirect_size(name: str, width: int, height: int) -> None:
                            f"{2 * MIN_HEIGHT}x{MIN_HEIGHT}); fix: pass a larger image")
 
 
-def check_exr(path: str | Path) -> tuple[dict[str, np.ndarray] | None, dict, dict]:
-    """A user's single-file EXR for an equirect stage, under the module's rules -> (channels to write
-    instead of the file, or None when the file is kept byte for byte; its header attributes; facts for
-    the run record: ``repaired`` / ``dropped`` notes). Raises InputRefused (one line)."""
+def check_exr(path: str | Path, equirect: bool = True) -> tuple[dict[str, np.ndarray] | None, dict, dict]:
+    """A user's single-file EXR for a stage, under the module's rules (``equirect``: also the panorama
+    size rule) -> (channels to write instead of the file, or None when the file is kept byte for byte;
+    its header attributes; facts for the run record: ``repaired`` / ``dropped`` notes). Raises
+    InputRefused (one line)."""
     from .exr import ExrError, read_exr
 
     path = Path(path)
@@ -132,8 +133,9 @@ def check_exr(path: str | Path) -> tuple[dict[str, np.ndarray] | None, dict, dic
                            f"(e.g. oiiotool IN -o OUT.exr)") from None
     if not channels:
         raise InputRefused(f"{path.name} has no channels; fix: pass an EXR with R, G, B (and Z)")
-    h, w = next(iter(channels.values())).shape
-    check_equirect_size(path.name, w, h)
+    if equirect:
+        h, w = next(iter(channels.values())).shape
+        check_equirect_size(path.name, w, h)
     facts: dict = {}
     out = dict(channels)
     colour = all(c in channels for c in "RGB")

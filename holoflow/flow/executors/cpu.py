@@ -59,7 +59,7 @@ def cpu_facts() -> dict[str, str]:
     except OSError:
         pass
     flags = set(info.get("flags", "").split())
-    return {"vendor": info.get("vendor_id", ""), "model": info.get("model name", platform.processor()),
+    return {"vendor": info.get("vendor_id", ""), "model": info.get("model name", ""),
             "isa": isa_class(flags)}
 
 
