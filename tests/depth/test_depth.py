@@ -184,7 +184,8 @@ def test_simulated_relative_is_calibrated_like_a_network():
     edges = np.array([ndi.maximum_filter(lf, 3) - ndi.minimum_filter(lf, 3) for lf in logr]) > 0.2
     assert np.abs(rel - smooth)[edges].mean() > 1.5 * np.abs(rel - smooth)[~edges].mean()
     again = simulated_relative(r, cos, seed=0)
-    assert np.array_equal(again, raw.astype(np.float32))  # seeded; same call, same inputs, same process: one code path, so bit-equal on any CPU
+    # seeded; same call, same inputs, same process: one code path, so bit-equal on any CPU
+    assert np.array_equal(again, raw.astype(np.float32))
 
 
 # --- hard cases -------------------------------------------------------------------------------------
@@ -254,7 +255,8 @@ def test_pipeline_accuracy_on_analytic_room(room_pano):
     m = pd.score(md.depth, r)
     assert m["abs_rel"] < 0.08 and m["delta1"] > 0.95 and m["coverage"] == 1.0
     again = pd.estimate_disparity(rgb, r, "simulated", TangentDepthParams(face_size=32, grid=(4, 4)))
-    assert np.array_equal(again.disparity, res.disparity)  # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    assert np.array_equal(again.disparity, res.disparity)
 
 
 # --- the stage programs -----------------------------------------------------------------------------

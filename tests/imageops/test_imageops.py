@@ -82,7 +82,8 @@ def test_lineart_contract_and_wrap(base):
     assert 0.0 <= lines.min() and lines.max() <= 1.0 and lines.max() > 0.5
     assert seam_ok(lines)
     assert roll_error(lineart, rgb, 37) < 1e-6
-    np.testing.assert_array_equal(lineart(rgb), lines)                                 # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    np.testing.assert_array_equal(lineart(rgb), lines)
 
 
 def test_lineart_marks_the_base_images_edges(base):
@@ -125,7 +126,8 @@ def test_styles_contract_seam_determinism(base, style):
     assert out.shape == rgb.shape and out.dtype == np.float32 and np.isfinite(out).all()
     assert out.min() >= 0.0 and out.max() <= 1.0
     assert seam_ok(out)
-    np.testing.assert_array_equal(stylize(rgb, lines, style), out)  # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    np.testing.assert_array_equal(stylize(rgb, lines, style), out)
     assert roll_error(lambda x: stylize(x, lineart(x), style), rgb, 64) < 0.01
     assert np.abs(out - np.clip(rgb, 0, 1)).mean() > 0.005                             # it does something
 
@@ -152,7 +154,8 @@ def test_detail_enhancement(base):
     out = enhance_detail(rgb, 0.8)
     assert out.shape == rgb.shape and out.dtype == np.float32 and np.isfinite(out).all()
     assert seam_ok(out)
-    np.testing.assert_array_equal(enhance_detail(rgb, 0.8), out)  # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    np.testing.assert_array_equal(enhance_detail(rgb, 0.8), out)
     assert roll_error(lambda x: enhance_detail(x, 0.8), rgb, 50) < 1e-6
 
     def high(x):

@@ -94,7 +94,8 @@ def test_stylize_without_a_style_word_passes_through(chain, tmp_path):
     r = run_stage(tmp_path, "stylize", "classical", {"width": W, "height": H, "style": "auto"},
                   "a small kitchen", {"pano": base})
     assert r.returncode == 0, r.stderr
-    np.testing.assert_array_equal(read_rgb(tmp_path / "stylize" / "out" / "pano.exr"), read_rgb(base / "pano.exr"))  # a copy
+    # a copy
+    np.testing.assert_array_equal(read_rgb(tmp_path / "stylize" / "out" / "pano.exr"), read_rgb(base / "pano.exr"))
     assert (tmp_path / "stylize" / "out" / "lineart.exr").exists()
 
 

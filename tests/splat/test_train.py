@@ -112,7 +112,8 @@ def test_masked_pixels_are_ignored():
         train(m, [dict(view, image=img, mask=mask)], cfg, seed=3)
         models.append(m)
     for k in GaussianModel.PARAMS:
-        assert torch.equal(getattr(models[0], k), getattr(models[1], k)), k  # same call, same inputs, same process: one code path, so bit-equal on any CPU
+        # same call, same inputs, same process: one code path, so bit-equal on any CPU
+        assert torch.equal(getattr(models[0], k), getattr(models[1], k)), k
 
 
 def test_densification_deterministic_and_capped():
@@ -127,7 +128,8 @@ def test_densification_deterministic_and_capped():
         runs.append((m, log))
     (a, la), (b, lb) = runs
     assert la["loss"] == lb["loss"] and la["count"] == lb["count"]
-    assert all(torch.equal(getattr(a, k), getattr(b, k)) for k in GaussianModel.PARAMS)  # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    # same call, same inputs, same process: one code path, so bit-equal on any CPU
+    assert all(torch.equal(getattr(a, k), getattr(b, k)) for k in GaussianModel.PARAMS)
     assert la["final_count"] > 60 and any(e["split"] + e["cloned"] > 0 for e in la["densify"])
     capped = GaussianModel.from_points(gt["means"][:60], gt["colors"][:60])
     with pytest.warns(UserWarning, match="max_gaussians"):
