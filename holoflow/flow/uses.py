@@ -69,7 +69,7 @@ def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     from holoflow.io.exr import write_rgb
     from holoflow.io.image import ImageImportError, read_panorama_image
 
-    from ..io.validate import InputRefused
+    from holoflow.io.validate import InputRefused
 
     try:
         rgb, facts = read_panorama_image(src)
@@ -88,8 +88,8 @@ def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
 def _import_exr(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     """A single EXR for an EXR stage under holoflow.io.validate's rules: kept byte for byte when it
     passes, else written repaired (the notes go to the run record and the step's line), or refused."""
-    from ..io.exr import write_exr
-    from ..io.validate import InputRefused, check_exr
+    from holoflow.io.exr import write_exr
+    from holoflow.io.validate import InputRefused, check_exr
     from .store import sha256_file
 
     s = ctx.pipe.stages[stage]

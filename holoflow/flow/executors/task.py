@@ -38,7 +38,7 @@ def step_env(resources: dict[str, Any]) -> dict[str, str]:
     steps took 5.4 s passive, 3.9 s with the bounded spin on 2 idle cores, 11.6 vs 9.1 s with two
     busy processes beside them (docs/profile-preview.md).
 
-    BLAS code paths are pinned (``holoflow.executors.cpu.PINNED_ENV``) so that Intel and AMD hosts run
+    BLAS code paths are pinned (``holoflow.flow.executors.cpu.PINNED_ENV``) so that Intel and AMD hosts run
     the same kernels. The same on every executor, so a step computes the same bytes under ``-j 1``,
     ``-j N`` and Ray.
     """
