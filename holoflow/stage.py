@@ -26,6 +26,7 @@ THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NU
 Progress = Callable[[int, int, str], None] | None
 
 P = TypeVar("P")
+_loaded: list["Job"] = []      # the job this process loaded: run_main checks its outputs
 
 
 @dataclass
@@ -62,6 +63,7 @@ class Job:
             extra={k: v for k, v in spec.items() if k not in _KNOWN},
         )
         job.apply_threads()
+        _loaded.append(job)
         return job
 
     def apply_threads(self) -> None:
@@ -138,9 +140,19 @@ USER_ERRORS = (UserError, ValueError, OSError, ImportError, json.JSONDecodeError
 
 def run_main(main: Callable[[], int], stage: str) -> NoReturn:
     """Exit with ``main()``'s code. A user mistake (``USER_ERRORS``) ends as one line on stderr,
-    prefixed with the stage name, and exit code 1; anything else keeps its traceback (a bug)."""
+    prefixed with the stage name, and exit code 1; anything else keeps its traceback (a bug).
+
+    After exit 0 the job's output files are checked (holoflow.io.validate.output_problem): a NaN or inf
+    (other than sky in a depth channel) fails the step here, in one line naming the stage and the file,
+    so a non-finite value is caught at the step it first appears in and never committed."""
     try:
         code = main()
+        if code == 0 and _loaded:
+            from holoflow.io.validate import output_problem
+
+            problem = output_problem(_loaded[-1].output_dir)
+            if problem:
+                sys.exit(f"{stage}: non-finite output, nothing committed: {problem} (docs/hard-inputs.md)")
     except USER_ERRORS as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         sys.exit(f"{stage}: {first}")

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import sys
 
 from holoflow.commands.options import common, load, options, parser
 
@@ -18,8 +19,9 @@ def main(argv: list[str]) -> int:
     pipe, store = load(args)
     ctx = Context.build(pipe, store, options(args))
     st = status(ctx)
+    kinds = cpu_kinds(store, st)
     if args.json:
-        print(json.dumps({"prompt": ctx.prompt, "profile": ctx.profile, "stages": st}, indent=1))
+        print(json.dumps({"prompt": ctx.prompt, "profile": ctx.profile, "stages": st, "cpu_kinds": kinds}, indent=1))
         return 0
     width = max(len(n) for n in st)
     for name, s in st.items():
@@ -27,4 +29,20 @@ def main(argv: list[str]) -> int:
         if s.get("engine"):
             why = f"{engine_note({'engine': s['engine']['ran'], 'why': s['engine']['why']})}; {why}"
         print(f"{name:<{width}}  {s['state']:<7}  {why}".rstrip())
+    from holoflow.flow.executors.cpu import bytes_note
+
+    if note := bytes_note(kinds):
+        print(note, file=sys.stderr)              # a note, not a row of the table
     return 0
+
+
+def cpu_kinds(store, st: dict) -> dict[str, list[str]]:
+    """{CPU kind: [stage]} of the fresh steps' records ('' for records without one)."""
+    from holoflow.flow.executors.cpu import cpu_kind
+
+    kinds: dict[str, list[str]] = {}
+    for name, s in st.items():
+        rec = store.record(s["key"]) if s.get("key") and s["state"] == "fresh" else None
+        if rec is not None:
+            kinds.setdefault(cpu_kind(rec["provenance"].get("cpu")), []).append(name)
+    return kinds

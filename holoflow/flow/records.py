@@ -81,7 +81,7 @@ def finish_batch(store: Store, states: list[SceneRun]) -> None:
 def write_run(st: SceneRun, latest: bool) -> None:
     ctx, summary = st.ctx, st.summary
     stages = {n: {"key": e.get("key"), "how": e["how"], "outputs": st.outputs[n],
-                  **({"source": e["source"]} if "source" in e else {})}
+                  **{k: e[k] for k in ("source", "import") if k in e}}
               for n, e in summary["stages"].items()}
     info = {"run": st.run_id, "pipeline": str(ctx.pipe.path), "prompt": ctx.prompt, "profile": ctx.profile,
             "seed": ctx.seed, "ok": summary["ok"], "seconds": summary.get("seconds"), "stages": stages,

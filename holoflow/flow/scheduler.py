@@ -21,7 +21,7 @@ from .executors import StepTask
 from .pipeline import PipelineError, check_files
 from .records import SceneRun, finish_batch, finish_run, made_with, write_run
 from .status import chosen_engine, dry_run, engine_note, explain
-from .uses import dropped_uses, import_use
+from .uses import dropped_uses, import_note, import_use
 
 
 class StepFailed(Exception):
@@ -191,7 +191,7 @@ class _Scheduler:
                 info = {"how": "used", "source": str(ctx.uses[name]), "key": None}
                 if name in ctx.imports:
                     info["import"] = ctx.imports[name]
-                self.resolved(st, name, info, f" ({ctx.uses[name]})")
+                self.resolved(st, name, info, f" ({ctx.uses[name]}{import_note(ctx.imports.get(name))})")
                 continue
             comp = ctx.components(name, st.outputs)
             key = cache_key(comp)

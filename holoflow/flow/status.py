@@ -53,7 +53,7 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
         if name in ctx.uses:
             out[name] = {"state": "fresh", "reasons": [f"used: {ctx.uses[name]}"], "key": None}
             outputs[name] = _digests_of(ctx.uses[name], s.primary)
-            if s.primary and s.primary.endswith(".exr") and ctx.uses[name].suffix.lower() in IMAGE_EXTS:
+            if s.primary and s.primary.endswith(".exr") and ctx.uses[name].suffix.lower() in (*IMAGE_EXTS, ".exr"):
                 src_sha = outputs[name][s.primary]["digest"]
                 outputs[name] = import_cache(ctx, src_sha) or outputs[name]  # the converted EXR's digest
             continue

@@ -15,6 +15,11 @@ if TYPE_CHECKING:
     from .context import Context
 
 
+def import_note(facts: dict | None) -> str:
+    """'; repaired ...; dropped ...' for a step line: what an import changed (holoflow.io.validate)."""
+    return "".join(f"; {k} {facts[k]}" for k in ("repaired", "dropped") if facts and k in facts)
+
+
 def dropped_uses(ctx: Context) -> dict[str, str]:
     """Stages the latest run took from a user's file (``--use``) that ``ctx`` does not: stage -> source."""
     latest = ctx.store.run_info(ctx.store.latest_run_id()) or {}
@@ -31,6 +36,8 @@ def import_use(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
             raise PipelineError(f"--use {stage}={src}: the folder is empty; fix: point at the stage's files")
     elif s.primary and s.primary.endswith(".exr") and src.suffix.lower() in IMAGE_EXTS:
         return _import_image(ctx, stage, src)
+    elif s.primary and s.primary.endswith(".exr") and src.suffix.lower() == ".exr":
+        return _import_exr(ctx, stage, src)
     else:
         name = s.primary or src.name
         if s.primary and Path(s.primary).suffix.lower() != src.suffix.lower():
@@ -40,6 +47,10 @@ def import_use(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
         files = {name: src}
     for rel, p in files.items():
         _validate_file(stage, p)
+    return _copy_in(ctx, stage, files)
+
+
+def _copy_in(ctx: Context, stage: str, files: dict[str, Path]) -> dict[str, dict]:
     outputs = {}
     for rel, p in files.items():
         tmp = ctx.store.staging(f"use-{stage}") / "f"
@@ -58,9 +69,11 @@ def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     from holoflow.io.exr import write_rgb
     from holoflow.io.image import ImageImportError, read_panorama_image
 
+    from holoflow.io.validate import InputRefused
+
     try:
         rgb, facts = read_panorama_image(src)
-    except ImageImportError as e:
+    except (ImageImportError, InputRefused) as e:
         raise PipelineError(f"--use {stage}: {e}") from None
     tmp = ctx.store.staging(f"use-{stage}") / "f.exr"
     write_rgb(tmp, rgb, {"holoflow.source": facts["file"], "holoflow.source_sha256": facts["sha256"],
@@ -69,6 +82,32 @@ def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     tmp.parent.rmdir()
     ctx.imports[stage] = facts
     import_cache(ctx, facts["sha256"], out)
+    return out
+
+
+def _import_exr(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
+    """A single EXR for an EXR stage under holoflow.io.validate's rules: kept byte for byte when it
+    passes, else written repaired (the notes go to the run record and the step's line), or refused."""
+    from holoflow.io.exr import write_exr
+    from holoflow.io.validate import InputRefused, check_exr
+    from .store import sha256_file
+
+    s = ctx.pipe.stages[stage]
+    equirect = s.config is not None and s.config.__module__.startswith("holoflow.")   # holoflow's own EXR stages
+    try:
+        channels, attrs, facts = check_exr(src, equirect)
+    except InputRefused as e:
+        raise PipelineError(f"--use {stage}: {e}") from None
+    if channels is None:
+        return _copy_in(ctx, stage, {ctx.pipe.stages[stage].primary: src})
+    sha = sha256_file(src)
+    tmp = ctx.store.staging(f"use-{stage}") / "f.exr"
+    write_exr(tmp, channels, {**attrs, "holoflow.source": src.name, "holoflow.source_sha256": sha,
+                              "holoflow.import_notes": facts})
+    out = {ctx.pipe.stages[stage].primary: ctx.store.put(tmp)}
+    tmp.parent.rmdir()
+    ctx.imports[stage] = {"file": src.name, "sha256": sha, **facts}
+    import_cache(ctx, sha, out)
     return out
 
 

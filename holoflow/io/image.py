@@ -3,7 +3,9 @@ one PNG writer (``write_png``).
 
 Reads JPG, PNG (8 / 16 bit), TIFF, HDR and EXR through OpenImageIO. Integer files (8 / 16 bit) are
 sRGB-encoded and decoded to linear light; float files (HDR, EXR, float TIFF) are linear already and
-kept as they are (values > 1 allowed). An equirect panorama is 2:1; anything else is refused with one
+kept as they are (values > 1 allowed), repaired by holoflow.io.validate's colour rule (NaN, inf,
+negative, huge values; counted in the facts). A file the decoder reports as damaged (a JPEG cut short)
+is refused. An equirect panorama is 2:1; anything else is refused with one
 line giving the size. XMP GPano metadata (Google's photo-sphere tags) is honoured: a cropped panorama
 (``GPano:CroppedAreaImageWidthPixels`` < ``GPano:FullPanoWidthPixels``) is placed at its
 ``CroppedAreaLeftPixels`` / ``CroppedAreaTopPixels`` into the full equirect canvas (black elsewhere).
@@ -15,13 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .validate import InputRefused, check_equirect_size, colour_rule, describe, repair_colour
+
 #: extensions that import as images (EXR is read by holoflow.io.exr when it is a holoflow file)
 IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".hdr", ".exr")
 _GPANO = ("FullPanoWidthPixels", "FullPanoHeightPixels", "CroppedAreaImageWidthPixels",
           "CroppedAreaImageHeightPixels", "CroppedAreaLeftPixels", "CroppedAreaTopPixels")
 
 
-class ImageImportError(ValueError):
+class ImageImportError(InputRefused):
     """A file that cannot be used as an equirect panorama: one line, with the fix."""
 
 
@@ -33,14 +37,19 @@ def read_panorama_image(path: str | Path) -> tuple[np.ndarray, dict]:
     path = Path(path)
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        raise ImageImportError(f"{path.name}: OpenImageIO cannot read it ({oiio.geterror().strip()}); "
+        why = (oiio.geterror().strip() or "unknown format").splitlines()[0]
+        raise ImageImportError(f"{path.name}: OpenImageIO cannot read it ({why}); "
                                "fix: pass a JPG, PNG, TIFF, HDR or EXR panorama")
     try:
         spec = inp.spec()
         fmt = str(spec.format)
         pixels = inp.read_image(0, 0, 0, min(spec.nchannels, 4), "float")
+        damage = inp.geterror().strip() if inp.has_error else ""
     finally:
         inp.close()
+    if damage:        # a file cut short or corrupt: the decoder filled what it could not read
+        raise ImageImportError(f"{path.name} is damaged (the decoder says: {damage.splitlines()[0]}); "
+                               "fix: copy or export the file again")
     if pixels is None or spec.width < 1 or spec.height < 1:
         raise ImageImportError(f"{path.name}: no pixels could be read; fix: check the file")
     img = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, -1)
@@ -52,17 +61,22 @@ def read_panorama_image(path: str | Path) -> tuple[np.ndarray, dict]:
 
         rgb = srgb_to_linear(rgb)
         colour = f"sRGB {fmt} decoded to linear"
-    rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+    try:
+        rgb, counts = repair_colour(rgb)
+    except ValueError as e:
+        raise ImageImportError(f"{path.name}: {e}") from None
     facts = {"file": path.name, "sha256": _sha256(path), "size": [spec.width, spec.height],
              "format": fmt, "colour": colour}
+    if counts:
+        facts["repaired"] = f"R,G,B: {describe(counts, rgb.size)} ({colour_rule()})"
     gpano = {k: spec.getattribute(f"GPano:{k}") for k in _GPANO}
     if all(gpano.get(k) is not None for k in _GPANO[:4]):
         rgb, placed = place_cropped(rgb, {k: int(v) for k, v in gpano.items() if v is not None})
         facts["gpano"] = placed
-    H, W = rgb.shape[:2]
-    if W != 2 * H:
-        raise ImageImportError(f"{path.name} is {W}x{H}, not a 2:1 equirect panorama; fix: pass a full "
-                               f"360x180 equirect image (e.g. {2 * H}x{H}) or one with GPano crop metadata")
+    try:
+        check_equirect_size(path.name, rgb.shape[1], rgb.shape[0])
+    except InputRefused as e:
+        raise ImageImportError(str(e)) from None
     return rgb, facts
 
 

@@ -52,9 +52,13 @@ def test_closure_terminates_on_a_cycle_and_reads_namespace_folders(tmp_path):
     assert _closure(tmp_path, "prog.py") == {"prog.py", "tools/a.py", "tools/b.py"}
 
 
+STAGE_CHECK = {"holoflow/io/__init__.py", "holoflow/io/validate.py", "holoflow/io/exr.py"}
+
+
 def test_holoflow_is_found_outside_the_pipeline_folder(tmp_path):
     _write(tmp_path, {"prog.py": "def main():\n    from holoflow.stage import Job\n"})
-    assert _closure(tmp_path, "prog.py") == {"prog.py", "holoflow/__init__.py", "holoflow/stage.py"}
+    # holoflow/stage.py checks every step's outputs with holoflow/io/validate.py (which reads EXRs)
+    assert _closure(tmp_path, "prog.py") == {"prog.py", "holoflow/__init__.py", "holoflow/stage.py", *STAGE_CHECK}
 
 
 @pytest.fixture(scope="module")

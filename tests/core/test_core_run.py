@@ -31,7 +31,8 @@ def test_record_has_provenance(project, capsys):
     assert "@progress" in log
     # the program, what it imports (holoflow/stage.py and its package), and its `code:` folder
     assert rec["components"]["code"].keys() == {"gen.py", "holoflow/__init__.py", "holoflow/stage.py",
-                                                "lib/helpers.py"}
+                                                "lib/helpers.py", "holoflow/io/__init__.py",
+                                                "holoflow/io/validate.py", "holoflow/io/exr.py"}
 
 
 def test_force_reruns_one_step_and_cutoff_keeps_downstream(project, capsys):

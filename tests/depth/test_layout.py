@@ -70,7 +70,8 @@ def test_layout_recovers_a_synthetic_room():
 
 def test_turning_the_camera_turns_the_depth():
     """Yaw is a nuisance: a quarter turn of the panorama (the line-segment views sit every 45 degrees,
-    the Manhattan yaw is taken modulo 90 and the column DPs wrap) gives exactly the turned depth, and
+    the Manhattan yaw is taken modulo 90 and the column DPs wrap) gives the turned depth (to float
+    rounding), and
     any other turn moves the depth by a few percent on average (docs/depth-layout.md, round 5)."""
     img = _room()
     img = img * np.exp(np.random.default_rng(1).normal(0, 0.2, img.shape[:2] + (1,))).astype(np.float32)
@@ -80,7 +81,9 @@ def test_turning_the_camera_turns_the_depth():
     for shift in (W // 4, W // 2, 1, 19):
         d = np.roll(estimate_layout_depth(np.roll(img, shift, axis=1), cfg).depth, -shift, axis=1)
         if shift % (W // 4) == 0:
-            assert np.array_equal(d, d0), shift
+            # the turned depth up to float rounding: the views are the same pixels, but sums over them
+            # (and BLAS blocks) run in another order after the turn, so bit-equality is not guaranteed
+            np.testing.assert_allclose(d, d0, rtol=1e-5, err_msg=str(shift))
         else:
             assert np.mean(np.abs(d / d0 - 1)) < 0.05, shift
 

@@ -24,7 +24,7 @@ def test_blend_overlap_makes_copies_equal_and_crossfades():
     x = torch.randn(1, 4, 3, 10 + 4, generator=torch.Generator().manual_seed(0))
     before = x.clone()
     blend_overlap(x, 4)
-    assert torch.equal(x[..., :4], x[..., 10:])            # the two copies are one again
+    assert torch.equal(x[..., :4], x[..., 10:])            # the two copies are one again (one value written twice)
     assert torch.equal(x[..., 4:10], before[..., 4:10])    # nothing else is touched
     t = (torch.arange(4) + 0.5) / 4
     assert torch.allclose(x[..., :4], (1 - t) * before[..., 10:] + t * before[..., :4])
@@ -63,6 +63,7 @@ def test_generate_pano(tiny_sd):
                       progress=lambda d, t, what: steps.append((d, t)))
     _check_pano(a)
     assert steps[-1] == (2, 2)
+    # same call, same inputs, same process: one code path, so bit-equal on any CPU
     assert np.array_equal(a, generate_pano("a wooden cabin", 64, 32, steps=2, seed=0, model=str(tiny_sd[0])))
     b = generate_pano("a wooden cabin", 64, 32, steps=2, seed=1, model=str(tiny_sd[0]))
     assert not np.array_equal(a, b)
@@ -85,6 +86,7 @@ def test_stylize(tiny_sd, base_image):
     a = stylize(base_image, line, "watercolor", 64, 32, steps=2, strength=1.0, seed=0, model=str(sd),
                 controlnet=str(cnet))
     _check_pano(a)
+    # same call, same inputs, same process: one code path, so bit-equal on any CPU
     assert np.array_equal(a, stylize(base_image, line, "watercolor", 64, 32, steps=2, strength=1.0, seed=0,
                                      model=str(sd), controlnet=str(cnet)))
     other = stylize(base_image, 1 - line, "watercolor", 64, 32, steps=2, strength=1.0, seed=0,
@@ -102,6 +104,7 @@ def test_refine(tiny_sd, base_image):
     a = refine(base_image, "detailed", 64, 32, strength=0.5, tile=32, overlap=8, steps=2, seed=0,
                model=str(sd), controlnet=str(cnet))
     _check_pano(a)
+    # same call, same inputs, same process: one code path, so bit-equal on any CPU
     assert np.array_equal(a, refine(base_image, "detailed", 64, 32, strength=0.5, tile=32, overlap=8, steps=2,
                                     seed=0, model=str(sd), controlnet=str(cnet)))
     others = [refine(base_image, "detailed", 64, 32, strength=0.5, tile=32, overlap=8, steps=2, seed=s,

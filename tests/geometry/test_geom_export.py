@@ -24,7 +24,7 @@ def test_cameras_json_round_trip(tmp_path):
     write_cameras(tmp_path / "cameras.json", cams)
     back = read_cameras(tmp_path / "cameras.json")
     K2, V2 = cameras_tensors(back)
-    assert torch.equal(K2, K) and torch.equal(V2, V)
+    assert torch.equal(K2, K) and torch.equal(V2, V)  # JSON keeps a float's shortest repr: exact round trip
     assert back["views"][7]["kind"] == "supplementary" and back["views"][7]["base"] == 0
     assert back["K"] == K.tolist()
     write_cameras(tmp_path / "again.json", back)  # the added K is not written

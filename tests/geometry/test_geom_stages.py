@@ -1,4 +1,5 @@
 """point_cloud, pano_set and pcd_set run as processes (the step protocol) on a small synthetic RGB-D pano."""
+import contextlib
 import json
 import subprocess
 import sys
@@ -134,6 +135,7 @@ def test_stage_reruns_are_byte_identical(stage_outputs, rgbd_dir, tmp_path):
         files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
         assert files and files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
         for f in files:
+            # the same program on the same inputs, CPU and thread count: one code path
             assert (a / f).read_bytes() == (b / f).read_bytes(), f"{stage}: {f} differs on rerun"
 
 
@@ -156,8 +158,9 @@ def test_pcd_set_edge_points_leave_the_image_but_mark_pixels_seen(stage_outputs,
     gained = 0
     for v, vm in zip(cams["views"], V):
         e, _ = read_exr(tmp_path / "pcd_set_out" / v["file"])
-        _, hit, _ = project_points_zbuffer(xyz, xyz[:, :1], K, vm, cams["height"], cams["width"],
-                                           footprint_radius(xyz, vm, K, spacing))
+        with torch_threads(1):    # the step's thread count (cpus 1): the same code path as the step
+            _, hit, _ = project_points_zbuffer(xyz, xyz[:, :1], K, vm, cams["height"], cams["width"],
+                                               footprint_radius(xyz, vm, K, spacing))
         assert np.array_equal(e["seen"], hit.float().numpy())
         assert (e["A"] <= e["seen"]).all()
         gained += int((e["seen"] > e["A"]).sum())
@@ -187,3 +190,14 @@ def test_pcd_set_offsets_ignore_the_sky_shell(tmp_path):
     shell = [json.loads(ln[6:]) for ln in pc.stdout.splitlines() if ln.startswith("@meta ")][0]["shell_radius"]
     med = [json.loads(ln[6:]) for ln in pcd.stdout.splitlines() if ln.startswith("@meta ")][0]["median_depth"]
     assert max(med) < 0.5 * shell and min(med) > 0
+
+
+@contextlib.contextmanager
+def torch_threads(n: int):
+    """torch's intra-op thread count set to ``n`` for the block (a matmul's sums may split by thread)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)

@@ -71,7 +71,7 @@ def test_base_pano_contract_and_truth(chain):
 
 def test_base_pano_same_prompt_and_seed_same_bytes(chain):
     tmp, _ = chain
-    for f in ("pano.exr", "scene.json"):
+    for f in ("pano.exr", "scene.json"):  # the same program on the same inputs and CPU: one code path
         assert (tmp / "base_pano" / "out" / f).read_bytes() == (tmp / "base_pano_again" / "out" / f).read_bytes()
 
 
@@ -94,6 +94,7 @@ def test_stylize_without_a_style_word_passes_through(chain, tmp_path):
     r = run_stage(tmp_path, "stylize", "classical", {"width": W, "height": H, "style": "auto"},
                   "a small kitchen", {"pano": base})
     assert r.returncode == 0, r.stderr
+    # a copy
     np.testing.assert_array_equal(read_rgb(tmp_path / "stylize" / "out" / "pano.exr"), read_rgb(base / "pano.exr"))
     assert (tmp_path / "stylize" / "out" / "lineart.exr").exists()
 

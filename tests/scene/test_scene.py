@@ -113,7 +113,10 @@ def test_chunking_and_culling_do_not_change_results():
     o = torch.zeros_like(d)
     rgb_a, t_a = cast(scene, o, d, chunk=256)
     rgb_b, t_b = cast(scene, o, d, chunk=len(d))
-    np.testing.assert_array_equal(t_a.numpy(), t_b.numpy())
+    # not bit for bit: a chunk's length decides which rays fall in torch's scalar tail loop (libm) rather
+    # than its SIMD body (Sleef, 8 or 16 lanes by CPU), which may differ in the last bit
+    np.testing.assert_allclose(t_a.numpy(), t_b.numpy(), rtol=1e-6)
+    assert np.array_equal(np.isinf(t_a.numpy()), np.isinf(t_b.numpy()))              # hit or sky: exact
     np.testing.assert_allclose(rgb_a.numpy(), rgb_b.numpy(), atol=1e-6)
 
 
@@ -152,7 +155,7 @@ def test_pinhole_truth_matches_the_panorama(prompt):
     expect = (t.numpy() * cos).reshape(24, 24)
     finite = np.isfinite(expect)
     np.testing.assert_allclose(z[finite], expect[finite], rtol=1e-5)
-    assert np.array_equal(np.isfinite(z), finite)
+    assert np.array_equal(np.isfinite(z), finite)  # a miss is +inf by construction: exact on any CPU
 
 
 def test_pinhole_from_off_centre_camera():
@@ -211,7 +214,7 @@ def test_sun_shadows_only_with_the_shadow_effect():
     o, d = _rays([[0.0, 1.6, 3.0], [0.0, 1.6, -3.0]])                                 # under the slab; open ground
     lit, t = cast(scene, o, d)
     shaded, t2 = cast(dataclasses.replace(scene, effects=Effects(shadows=True)), o, d)
-    assert torch.equal(t, t2)
+    assert torch.equal(t, t2)  # shadows shade after the same hit test on the same rays: one code path
     assert torch.allclose(lit[1], shaded[1])                                          # open ground: unchanged
     # ground lit by ambient 0.5 (+ sun 1.0 when not in shadow): the shadow keeps a third of the light
     np.testing.assert_allclose((shaded[0] / lit[0]).numpy(), 1.0 / 3.0, rtol=1e-4)

@@ -21,6 +21,14 @@ def random_scene(n, seed, dtype=torch.float64, sh=False):
     return {k: v.requires_grad_(True) for k, v in p.items()}
 
 
+def assert_radii_match(got, want):
+    """Radii (ceil of a float reach, px; 0 = not drawn) of two float paths (numba, torch): equal, or one
+    apart where a reach within rounding of a whole pixel rounds up differently; at most 1 % of them.
+    Bit-equal float paths are not guaranteed across CPUs (torch's SIMD width and MKL pick per CPU)."""
+    d = (got.long() - want.long()).abs()
+    assert int(d.max()) <= 1 and float((d > 0).float().mean()) <= 0.01, int((d > 0).sum())
+
+
 def cameras(width, height, dtype=torch.float64, n=2):
     eyes = [[0, 0, 0], [0.3, -0.2, 0.1], [-0.4, 0.1, -0.2]][:n]
     vm = torch.stack([look_at(e, [0, 0, 3]) for e in eyes]).to(dtype)
@@ -50,7 +58,7 @@ def test_fast_matches_reference(seed, sh, dtype):
         assert fast[k].shape == ref[k].shape
         torch.testing.assert_close(fast[k], ref[k], **tol)
     torch.testing.assert_close(fast["meta"]["means2d"], ref["meta"]["means2d"], **tol)
-    assert torch.equal(fast["meta"]["radii"], ref["meta"]["radii"])
+    assert_radii_match(fast["meta"]["radii"], ref["meta"]["radii"])
     gtol = dict(rtol=1e-8, atol=1e-8) if dtype == torch.float64 else dict(rtol=2e-3, atol=2e-3)
     for k in NAMES:
         scale = gref[k].abs().max().clamp_min(1.0)
@@ -77,6 +85,7 @@ def test_deterministic():
     vm, K = cameras(31, 23, torch.float32)
     a, ga = render_and_grads(p, vm, K, 31, 23, "cpu")
     b, gb = render_and_grads(p, vm, K, 31, 23, "cpu")
+    # the numba kernels' sums run in a fixed order whatever the thread count: exact on any CPU
     assert torch.equal(a["rgb"], b["rgb"]) and all(torch.equal(ga[k], gb[k]) for k in NAMES)
 
 
@@ -98,7 +107,7 @@ def test_tile_binning_is_the_same_for_any_chunk_count(chunks):
     ref = cpu._bin_tiles_serial(*args, 1)
     got = cpu._bin_tiles(*args, chunks)
     for a, b in zip(ref, got):
-        assert np.array_equal(a, b)
+        assert np.array_equal(a, b)  # integer tile lists: exact on any CPU
     rec, pbox, ft, offsets, ids, pstart, ent = ref
     assert all(np.all(np.diff(ids[offsets[t]:offsets[t + 1]]) > 0) for t in range(len(offsets) - 1))
     assert np.array_equal(np.sort(ent), np.arange(len(ids)))      # every entry owned exactly once
@@ -229,7 +238,7 @@ def test_fast_matches_reference_when_most_gaussians_are_out_of_view(dtype):
     tol = dict(rtol=1e-9, atol=1e-10) if dtype == torch.float64 else dict(rtol=1e-4, atol=2e-5)
     for k in ("rgb", "alpha", "depth"):
         torch.testing.assert_close(fast[k], ref[k], **tol)
-    assert torch.equal(fast["meta"]["radii"], ref["meta"]["radii"])
+    assert_radii_match(fast["meta"]["radii"], ref["meta"]["radii"])
     gtol = dict(rtol=1e-8, atol=1e-8) if dtype == torch.float64 else dict(rtol=2e-3, atol=2e-3)
     for k in NAMES:
         scale = gref[k].abs().max().clamp_min(1.0)
@@ -255,11 +264,15 @@ def test_fast_projection_draws_what_the_reference_tests_draw(dtype):
     ext = pixel_extent(ref["cov2d"], ops)
     m2 = ref["means2d"]
     drawn = ref["valid"] & ((m2 + ext >= 0) & (m2 - ext <= m2.new_tensor([W, H]))).all(-1) & (ops >= 1 / 255)
-    assert torch.equal(fast["drawn"], drawn)
+    # the same tests on two float paths: equal except where a reach ends within rounding of the image edge
+    margin = torch.minimum((m2 + ext).abs(), (m2 - ext - m2.new_tensor([W, H])).abs()).amin(-1)
+    differ = fast["drawn"] != drawn
+    assert bool((margin[differ] <= 1e-3).all()) and int(differ.sum()) <= 2, int(differ.sum())
     outside = drawn & ((m2 < 0) | (m2 > m2.new_tensor([W, H]))).any(-1)
     assert int(outside.sum()) > 10 and int((~drawn).sum()) > 100       # the cases this test is about
     radii = torch.where(drawn, ext.max(-1).values.ceil(), torch.zeros_like(ext[..., 0])).to(torch.int32)
-    assert torch.equal(fast["radii"], radii)
+    assert_radii_match(fast["radii"][~differ], radii[~differ])
+    drawn = drawn & ~differ
     tol = dict(rtol=1e-9, atol=1e-9) if dtype == torch.float64 else dict(rtol=1e-4, atol=1e-4)
     torch.testing.assert_close(fast["ext"][drawn], ext[drawn].double(), **tol)
     torch.testing.assert_close(fast["conics"][drawn], ref["conics"][drawn], **tol)

@@ -23,6 +23,7 @@ from typing import Any, Callable
 from holoflow import __version__
 from ..store import Store, remove_tree
 from .task import StepTask, step_env
+from .cpu import PINNED_ENV, cpu_facts
 
 LOG_TAIL = 15
 
@@ -146,6 +147,7 @@ def _record(store: Store, task: StepTask, run: _Launched, files: list[Path], exe
     versions.update(meta.pop("versions", {}) if isinstance(meta.get("versions"), dict) else {})
     if "torch" in meta:
         versions["torch"] = meta["torch"]
+    pinned = {**step_env(task.resources), **task.env}     # what the step's environment held
     return {
         "key": task.key, "stage": task.stage, "components": task.components, "outputs": committed,
         "provenance": {
@@ -154,7 +156,8 @@ def _record(store: Store, task: StepTask, run: _Launched, files: list[Path], exe
             "wall_s": round(run.wall, 3), "cpu_s": round(usage.ru_utime + usage.ru_stime, 3),
             "peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "exit_code": run.code,
             "log": log_entry["digest"], "log_size": log_entry["size"],
-            "host": host, "executor": executor, "launch": "warm" if run.warm else "cold", "attempt": task.attempt,
+            "host": host, "cpu": {**cpu_facts(), **{k: pinned[k] for k in PINNED_ENV}}, "executor": executor,
+            "launch": "warm" if run.warm else "cold", "attempt": task.attempt,
             "resources": {**task.resources, **({"gpu_ids": task.env["CUDA_VISIBLE_DEVICES"]}
                                                if "CUDA_VISIBLE_DEVICES" in task.env else {})},
         },

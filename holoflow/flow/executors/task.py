@@ -38,10 +38,15 @@ def step_env(resources: dict[str, Any]) -> dict[str, str]:
     steps took 5.4 s passive, 3.9 s with the bounded spin on 2 idle cores, 11.6 vs 9.1 s with two
     busy processes beside them (docs/profile-preview.md).
 
-    The same on every executor, so a step computes the same bytes under ``-j 1``, ``-j N`` and Ray.
+    BLAS code paths are pinned (``holoflow.flow.executors.cpu.PINNED_ENV``) so that Intel and AMD hosts run
+    the same kernels. The same on every executor, so a step computes the same bytes under ``-j 1``,
+    ``-j N`` and Ray.
     """
+    from .cpu import PINNED_ENV
+
     n = str(max(1, min(int(resources.get("cpus", 1)), os.cpu_count() or 1)))
     env = {v: n for v in THREAD_VARS}
+    env.update({k: os.environ.get(k, v) for k, v in PINNED_ENV.items()})     # CPU-independent BLAS paths
     if "OMP_WAIT_POLICY" in os.environ:
         env["OMP_WAIT_POLICY"] = os.environ["OMP_WAIT_POLICY"]
     else:
