@@ -54,6 +54,12 @@ def main(argv: list[str] | None = None) -> int:
         return dispatch(module, name, rest)
     except (PipelineError, StoreError) as e:
         return fail(str(e))
+    except OSError as e:        # the store's disk is full or read-only: one line, not a traceback
+        from holoflow.flow.executors.failure import store_problem
+
+        if (why := store_problem(e)) is None:
+            raise
+        return fail(why, 1)
     except KeyboardInterrupt:
         print("holoflow: interrupted; completed steps are kept", file=sys.stderr)
         return 130

@@ -55,7 +55,10 @@ def run_flags(r) -> None:
                    help="run up to N CPU slots of independent steps at once (stages' resources:)")
     r.add_argument("--executor", choices=["local", "ray"], default="local",
                    help="where steps run: this machine, or a Ray cluster (the ray extra)")
-    r.add_argument("--address", help="Ray cluster address (default: start a local Ray with -j CPUs)")
+    r.add_argument("--address", help="Ray cluster address (default: start a local Ray with -j CPUs); "
+                   "a token for it is read from $RAY_AUTH_TOKEN, $RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token")
+    r.add_argument("--connect-timeout", type=float, metavar="S",
+                   help="give up if no Ray cluster answers at --address within S seconds (default 60)")
     r.add_argument("--cold", action="store_true",
                    help="exec every step as a fresh Python (default: Python steps fork from a warm "
                    "template that imported torch & co once; also $HOLOFLOW_COLD=1)")
@@ -82,5 +85,6 @@ def options(args):
                    device=getattr(args, "device", None), lock_timeout=getattr(args, "lock_timeout", None),
                    verbose=getattr(args, "verbose", False), jobs=getattr(args, "jobs", 1),
                    executor=getattr(args, "executor", "local"), address=getattr(args, "address", None),
+                   connect_timeout=getattr(args, "connect_timeout", None),
                    retries=getattr(args, "retries", None),
                    cold=getattr(args, "cold", False) or os.environ.get("HOLOFLOW_COLD", "") not in ("", "0"))

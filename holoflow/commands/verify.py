@@ -24,6 +24,8 @@ def main(argv: list[str]) -> int:
         print(f"corrupt object {d} (quarantined; the step that made it will rerun)")
     for stage, rel in res["missing"]:
         print(f"missing object for {stage}: {rel} (that step will rerun)")
-    ok = not res["corrupt"] and not res["missing"]
+    for name in res["damaged_records"]:
+        print(f"damaged key record {name} (quarantined; its step will rerun)")
+    ok = not res["corrupt"] and not res["missing"] and not res["damaged_records"]
     print(f"holoflow verify: {n} objects {'all match their hashes' if ok else 'checked; damage found'}")
     return 0 if ok else 1

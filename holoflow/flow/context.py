@@ -31,6 +31,7 @@ class Options:
     jobs: int = 1                   # -j: CPU slots of the local executor (local Ray: its CPUs)
     executor: str = "local"         # local | ray
     address: str | None = None      # Ray cluster address (ray executor)
+    connect_timeout: float | None = None    # seconds to wait for the cluster at address (None: 60)
     retries: int | None = None      # extra attempts per failed step (None: the executor's default)
     cold: bool = False              # --cold: exec every local step (no warm template)
 

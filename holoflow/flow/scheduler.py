@@ -18,6 +18,7 @@ from typing import Any
 from .cachekey import cache_key
 from .context import BatchItem, Context, Options
 from .executors import StepTask
+from .executors.failure import store_problem
 from .pipeline import PipelineError, check_files
 from .records import SceneRun, finish_batch, finish_run, made_with, write_run
 from .status import chosen_engine, dry_run, engine_note, explain
@@ -29,7 +30,7 @@ class StepFailed(Exception):
 
 
 class Interrupted(KeyboardInterrupt):
-    """SIGTERM: stop like Ctrl-C (kill the running step, keep committed steps)."""
+    """SIGTERM or SIGHUP: stop like Ctrl-C (kill the running step, keep committed steps)."""
 
 
 class _Job:
@@ -70,8 +71,8 @@ def run_batch(scenes: list[BatchItem], display, lock_message=print, executor=Non
                             **({"label": st.scene.label} if st.scene.label else {})} for st in states]}
     store.ensure()
     store.lock(opts.lock_timeout, "run", lock_message)
-    try:
-        old_handler = signal.signal(signal.SIGTERM, _raise_interrupted)
+    try:                        # SIGTERM and SIGHUP (a closed terminal or ssh) stop it like Ctrl-C
+        old_handler = {sig: signal.signal(sig, _raise_interrupted) for sig in (signal.SIGTERM, signal.SIGHUP)}
     except ValueError:          # not the main thread: leave signals to the caller
         old_handler = None
     batch = {"ok": False, "scenes": [st.summary for st in states]}
@@ -86,8 +87,8 @@ def run_batch(scenes: list[BatchItem], display, lock_message=print, executor=Non
     finally:
         if sched.executor_made is not None and sched.executor_made.running():
             sched.executor_made.abort()
-        if old_handler is not None:
-            signal.signal(signal.SIGTERM, old_handler)
+        for sig, handler in (old_handler or {}).items():
+            signal.signal(sig, handler)
         seconds = round(time.monotonic() - t_run, 3)
         batch["seconds"] = seconds
         if sched.executor_made is not None:
@@ -102,6 +103,9 @@ def run_batch(scenes: list[BatchItem], display, lock_message=print, executor=Non
                 finish_run(st, latest=len(states) == 1)
             if len(states) > 1:
                 finish_batch(store, states)
+        except OSError as e:    # a full / read-only store: the step's own error already says so
+            if store_problem(e) is None or not any(st.failed for st in states):
+                raise
         finally:
             store.unlock()
     failed = [st for st in states if st.failed]
@@ -126,7 +130,8 @@ def make_executor_for(opts: Options, device: str, display):
         elif opts.verbose and not line.startswith("@meta "):
             display.line(f"    {label}| {line}")
 
-    return make_executor(opts.executor, opts.jobs, opts.address, device, on_line=on_line, warm=not opts.cold)
+    return make_executor(opts.executor, opts.jobs, opts.address, device, on_line=on_line, warm=not opts.cold,
+                         connect_timeout=opts.connect_timeout)
 
 
 class _Scheduler:
@@ -252,7 +257,7 @@ class _Scheduler:
             if result.get("aborted"):
                 return
             where = f" on {result['host']}" if result.get("host") and self.executor.kind != "local" else ""
-            if task.attempt <= self.retries and not result.get("bad_output"):
+            if task.attempt <= self.retries and not result.get("bad_output") and not result.get("store_error"):
                 self.display.line(f"{task.label}: attempt {task.attempt} failed ({result['reason']}{where}); "
                                   f"retrying")
                 task.attempt += 1
@@ -262,6 +267,8 @@ class _Scheduler:
             tries = f" after {task.attempt} attempts" if task.attempt > 1 else ""
             if result.get("bad_output"):
                 msg = f"stage '{task.label}' {result['reason']}; fix the stage program (log: {result['log']})"
+            elif result.get("store_error"):
+                msg = f"stage '{task.label}' was not committed: {result['reason']}"
             else:
                 where_log = f"--- last lines of {result['log']} ---" if result.get("log") else "---"
                 msg = (f"stage '{task.label}' failed ({result['reason']}{where}{tries}); nothing from it was "

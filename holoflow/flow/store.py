@@ -70,10 +70,17 @@ def write_atomic(path: Path, text: str) -> None:
 def _write_tmp(path: Path, text: str) -> Path:
     """A complete, fsynced sibling of ``path`` under a name unique to this writer (host, pid, random)."""
     tmp = path.with_name(f".{path.name}.{os.uname().nodename}.{os.getpid()}.{os.urandom(4).hex()}.tmp")
-    with open(tmp, "x") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
+    try:
+        with open(tmp, "x") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+    except BaseException:       # a full disk: leave no partial file behind
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise
     return tmp
 
 
@@ -128,7 +135,8 @@ class Store:
         try:
             for sub in ("objects", "keys", "stages", "runs", "pins", "tmp", "cache"):
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
-            probe = self.root / "tmp" / f".probe-{os.getpid()}"
+            # beside tmp/, not in it: the lock holder empties tmp/ at any moment
+            probe = self.root / f".probe-{os.getpid()}-{os.urandom(4).hex()}"
             probe.write_bytes(b"")
             probe.unlink()
         except OSError as e:
@@ -158,14 +166,20 @@ class Store:
                         raise StoreError(f"store {self.root} still locked by {holder or 'another holoflow'}"
                                          f" after {timeout:g} s; fix: wait for it, or raise --lock-timeout")
                     time.sleep(0.1)
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"pid {os.getpid()} ({what}, since {time.strftime('%H:%M:%S')})".encode(), 0)
+        try:                    # who holds it, for the next one that waits (not on a full disk)
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"pid {os.getpid()} ({what}, since {time.strftime('%H:%M:%S')})".encode(), 0)
+        except OSError:
+            pass
         self._lock_fd = fd
         self.clean_tmp()
 
     def unlock(self) -> None:
         if self._lock_fd is not None:
-            os.ftruncate(self._lock_fd, 0)
+            try:
+                os.ftruncate(self._lock_fd, 0)
+            except OSError:
+                pass
             fcntl.flock(self._lock_fd, fcntl.LOCK_UN)
             os.close(self._lock_fd)
             self._lock_fd = None
@@ -246,7 +260,27 @@ class Store:
 
     # -- key records ----------------------------------------------------------------------------
     def record(self, key: str) -> dict | None:
-        return read_json(self.key_path(key))
+        """The key record of ``key``; None when there is none, or when it is damaged (cut short, not
+        JSON): that one is moved to corrupt/ with a line on stderr, and its step runs again."""
+        path = self.key_path(key)
+        rec = read_json(path)
+        if rec is None and path.is_file():
+            self.quarantine_record(path)
+        return rec
+
+    def quarantine_record(self, path: Path, say: bool = True) -> None:
+        dest = self.root / "corrupt" / f"{path.name}.{time.time_ns()}"
+        try:
+            dest.parent.mkdir(exist_ok=True)
+            os.replace(path, dest)
+            where = f"moved to {dest}"
+        except FileNotFoundError:
+            return
+        except OSError as e:
+            where = f"left in place ({e.strerror})"
+        if say:
+            print(f"holoflow: key record {path.name} is damaged (not complete JSON); {where}; its step will "
+                  f"be recomputed", file=sys.stderr)
 
     def write_record(self, rec: dict, replace: bool = True) -> dict:
         """Commit a key record; returns the record now in force.
@@ -264,7 +298,10 @@ class Store:
             if existing is not None and self.outputs_ok(existing):
                 return existing
             write_atomic(path, json.dumps(rec, indent=1, sort_keys=True))     # the old one was damaged
-        write_atomic(self.root / "stages" / f"{rec['stage']}.json", json.dumps({"key": rec["key"]}))
+        try:                    # committed above; the pointer only serves `status` reasons
+            write_atomic(self.root / "stages" / f"{rec['stage']}.json", json.dumps({"key": rec["key"]}))
+        except OSError:
+            pass
         return rec
 
     def last_key(self, stage: str) -> str | None:
@@ -384,23 +421,26 @@ class Store:
             p.unlink(missing_ok=True)
 
     def verify(self) -> dict[str, list]:
-        """Rehash every object; quarantine mismatches; list records whose objects are missing."""
+        """Rehash every object; quarantine mismatches and damaged key records; list records whose
+        objects are missing."""
         bad = []
         for p in self.iter_objects():
             if sha256_file(p) != p.name:
                 self.quarantine(p.name)
                 bad.append(p.name)
-        missing = []
+        missing, damaged = [], []
         for kp in sorted((self.root / "keys").glob("*.json")):
             rec = read_json(kp)
             if rec is None:
-                missing.append((kp.name, "unreadable record"))
+                self.quarantine_record(kp, say=False)
+                damaged.append(kp.name)
                 continue
             for rel, e in rec.get("outputs", {}).items():
                 if not self.object_path(e["digest"]).is_file():
                     missing.append((rec.get("stage", "?"), rel))
         stray = list((self.root / "tmp").iterdir()) if (self.root / "tmp").is_dir() else []
-        return {"corrupt": bad, "missing": missing, "stray_tmp": [str(p) for p in stray]}
+        return {"corrupt": bad, "missing": missing, "damaged_records": damaged,
+                "stray_tmp": [str(p) for p in stray]}
 
 
 def _read_fd(fd: int) -> str:

@@ -22,9 +22,10 @@ __all__ = ["StepTask", "gpu_ids", "host_memory_gb", "make_executor", "step_env"]
 
 
 def make_executor(kind: str, jobs: int = 1, address: str | None = None, device: str = "cpu",
-                  on_line=None, warm: bool = True):
+                  on_line=None, warm: bool = True, connect_timeout: float | None = None):
     """The executor named ``kind`` (local | ray). ``on_line(label, line)`` gets each step's output lines
-    (local only; called on the thread that calls ``wait``); ``warm`` false: every local step exec'd."""
+    (local only; called on the thread that calls ``wait``); ``warm`` false: every local step exec'd;
+    ``connect_timeout``: seconds Ray waits for the cluster at ``address`` (None: 60)."""
     if kind == "local":
         from .local import LocalExecutor
 
@@ -32,7 +33,10 @@ def make_executor(kind: str, jobs: int = 1, address: str | None = None, device: 
     if kind == "ray":
         from .ray_executor import RayExecutor
 
-        return RayExecutor(address=address, jobs=jobs, device=device)
+        from .ray_connect import CONNECT_TIMEOUT_S
+
+        return RayExecutor(address=address, jobs=jobs, device=device,
+                           connect_timeout=CONNECT_TIMEOUT_S if connect_timeout is None else connect_timeout)
     from ..pipeline import PipelineError
 
     raise PipelineError(f"--executor {kind!r}: unknown executor; fix: use local or ray")

@@ -8,6 +8,7 @@ the step inherits), ``memory = memory_gb`` (clamped to the cluster's). Ray's own
 the runner retries a failed step itself (a dead worker reads as a failure "worker lost"), so every
 attempt is counted and logged the same way as with the local executor.
 
+Joining an existing cluster (``--address``): its token and a bounded wait, holoflow.flow.executors.ray_connect.
 Requires the ``ray`` extra (``pip install -e '.[ray]'``); docs/scale.md has the cluster set-up.
 """
 from __future__ import annotations
@@ -16,6 +17,7 @@ import sys
 import time
 from typing import Any
 
+from .ray_connect import CONNECT_TIMEOUT_S, held_stderr, join_failed, use_token, wait_for_cluster
 from .task import StepTask
 
 
@@ -29,7 +31,9 @@ class RayExecutor:
     kind = "ray"
     default_retries = 2
 
-    def __init__(self, address: str | None = None, jobs: int = 1, device: str = "cpu"):
+    def __init__(self, address: str | None = None, jobs: int = 1, device: str = "cpu",
+                 connect_timeout: float = CONNECT_TIMEOUT_S):
+        token = use_token(address)      # before Ray reads its config: it decides whether to send one
         try:
             import ray
         except ImportError:
@@ -37,6 +41,8 @@ class RayExecutor:
 
             raise PipelineError("--executor ray needs Ray; fix: pip install -e '.[ray]' (ray>=2.30)") from None
         self.ray = ray
+        if address and not ray.is_initialized():
+            wait_for_cluster(address, connect_timeout)
         # Ray's driver prints worker-death notices on stdout; keep stdout for --json (restored on close)
         self._stdout, sys.stdout = sys.stdout, sys.stderr
         t0 = time.monotonic()
@@ -45,7 +51,16 @@ class RayExecutor:
             kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
                                   "configure_logging": False}
             if address:
-                ray.init(address=address, **kw)
+                failed = None
+                with held_stderr() as said:       # Ray's retry warnings: shown only if the join works
+                    try:
+                        ray.init(address=address, **kw)
+                    except (ConnectionError, RuntimeError, ray.exceptions.RayError) as e:
+                        failed = e
+                if failed is not None:
+                    sys.stdout = self._stdout
+                    raise join_failed(address, failed, token) from None
+                sys.stderr.write(said["text"])
             else:
                 ray.init(num_cpus=max(1, int(jobs)), **kw)
         self.startup_s = time.monotonic() - t0

@@ -22,6 +22,7 @@ from typing import Any, Callable
 
 from holoflow import __version__
 from ..store import Store, remove_tree
+from .failure import exit_reason, store_problem
 from .task import StepTask, step_env
 from .cpu import PINNED_ENV, cpu_facts
 
@@ -36,8 +37,20 @@ def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], N
     ``on_line`` gets each output line (progress, meta, log); ``started`` the process once it runs (it
     has ``pid`` and ``kill()``); ``aborted()`` true means the run was stopped: nothing is committed and
     no failed log is kept. With a ``launcher`` (holoflow.flow.executors.warm) a Python program is forked
-    from a warm template instead of exec'd. Three steps: launch, validate the outputs, commit.
+    from a warm template instead of exec'd. Three steps: launch, validate the outputs, commit. A store
+    that refuses writes (full, read-only) is a failed result with ``store_error`` set; the record is
+    written last, so nothing half-committed is seen.
     """
+    try:
+        return _run_step(task, executor, on_line, started, aborted, launcher)
+    except OSError as e:
+        why = store_problem(e)
+        if why is None:
+            raise
+        return {"ok": False, "host": platform.node(), "reason": why, "tail": "", "store_error": True}
+
+
+def _run_step(task: StepTask, executor: str, on_line, started, aborted, launcher) -> dict[str, Any]:
     store = Store(task.store)
     staging = store.staging(task.stage)
     run = _launch(task, staging, on_line, started, launcher)
@@ -86,6 +99,7 @@ def _launch(task: StepTask, staging: Path, on_line, started, launcher) -> _Launc
     argv = [sys.executable, str(program), str(job)] if python else [str(program), str(job)]
     env = dict(os.environ, PYTHONUNBUFFERED="1", HOLOFLOW_STAGE=task.stage, **step_env(task.resources),
                **task.env)
+    env.pop("RAY_AUTH_TOKEN", None)     # a Ray cluster's secret: a step has no use for it
     warm = launcher is not None and python
     log_path = staging / "log.txt"
     meta: dict[str, Any] = {}
@@ -127,7 +141,7 @@ def _validate(run: _Launched) -> tuple[list[Path], dict[str, Any] | None]:
     files; else ([], the failure: {reason}, plus ``bad_output`` when the program itself is at fault and
     no retry helps)."""
     if run.code != 0:
-        reason = f"killed by signal {-run.code}" if run.code < 0 else f"exit code {run.code}"
+        reason = exit_reason(run.code, _tail(run.log_path, LOG_TAIL))
         return [], {"reason": reason + (" (its warm template died)" if run.lost else "")}
     files = sorted(p for p in run.out_dir.rglob("*") if not p.is_dir())
     bad = [p for p in files if p.is_symlink() or not p.is_file()]
