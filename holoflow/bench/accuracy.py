@@ -32,7 +32,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES
+from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES, stage_costs
 
 PROMPT = "a cozy wooden cabin at night"
 NEUTRAL = ["stylize.style=none", "detail.strength=0.0"]     # truth applies (the eval profile's choice)
@@ -104,18 +104,6 @@ def quick_points() -> list[Point]:
 
 
 # -- one point ------------------------------------------------------------------------------------
-def stage_costs(store, summary: dict) -> dict[str, dict]:
-    """Per stage of a run summary: how it was served and the cost of computing it, from its record:
-    {stage: {how, wall_s, cpu_s, peak_rss_mb}} (seconds, MB)."""
-    out = {}
-    for name, entry in summary["stages"].items():
-        prov = (store.record(entry["key"]) or {}).get("provenance", {}) if entry.get("key") else {}
-        out[name] = {"how": entry["how"], "wall_s": float(prov.get("wall_s", math.nan)),
-                     "cpu_s": float(prov.get("cpu_s", math.nan)),
-                     "peak_rss_mb": float(prov.get("peak_rss_mb", math.nan))}
-    return out
-
-
 def novel_intrinsics(size: int, fov_deg: float):
     """Pinhole K [3, 3] of the fixed novel-view camera (pixel centres at +0.5)."""
     import torch

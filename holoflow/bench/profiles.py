@@ -44,6 +44,18 @@ class Case:
     uses: tuple[str, ...] = ()
 
 
+def stage_costs(store, summary: dict) -> dict[str, dict]:
+    """Per stage of a run summary: how it was served and the cost of computing it, from its record:
+    {stage: {how, wall_s, cpu_s, peak_rss_mb}} (seconds, MB)."""
+    out = {}
+    for name, entry in summary["stages"].items():
+        prov = (store.record(entry["key"]) or {}).get("provenance", {}) if entry.get("key") else {}
+        out[name] = {"how": entry["how"], "wall_s": float(prov.get("wall_s", math.nan)),
+                     "cpu_s": float(prov.get("cpu_s", math.nan)),
+                     "peak_rss_mb": float(prov.get("peak_rss_mb", math.nan))}
+    return out
+
+
 def slug(text: str) -> str:
     return "-".join("".join(c if c.isalnum() else " " for c in text.lower()).split())[:48]
 
@@ -86,7 +98,6 @@ def unavailable(pipe, profile: str) -> str | None:
 def measure(case: Case, profile: str, args) -> tuple[dict, dict, dict]:
     """Run (or serve from the store) one case in one profile and score it at the viewing size:
     (row of figures, scores, pictures)."""
-    from holoflow.bench.accuracy import stage_costs
     from holoflow.evaluation.runs import run_pipeline
     from holoflow.flow.store import Store
     from holoflow.recon.viewing import ViewingSpec, score_run
