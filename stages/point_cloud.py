@@ -6,7 +6,10 @@ holoflow/geometry/area.py; pf.json records its angular spacing for the Gaussians
 points whose relative depth gradient exceeds ``grad_threshold`` (paper 0.4) dropped (definition and
 units: holoflow/geometry/pointcloud.py, docs/conventions.md); P_s at ``ps_width`` (paper 1024), the
 cloud the PCD set is projected from. Sky (inf depth) goes on a far shell of radius ``sky_radius``
-(0 = 2 x the 99th percentile of finite depth) so the scene stays enclosed. Colour is resampled
+(0 = 2 x the 99th percentile of finite depth) so the scene stays enclosed. P_f also holds a
+background layer (``layer_baseline`` > 0), after its grid's points: the far surface and the sky
+shell continued under every silhouette, as wide as an eye move of ``layer_baseline`` metres
+uncovers (holoflow/geometry/layers.py). Colour is resampled
 antialiased, depth point-sampled (no invented edge depths). PLY colours are 8-bit sRGB
 (docs/conventions.md); pano.exr is linear.
 """
@@ -25,6 +28,7 @@ def main() -> int:
 
     from holoflow.geometry.area import equirect_to_area_points, view_width
     from holoflow.geometry.config import PointCloudParams
+    from holoflow.geometry.layers import background_layer, layer_points
     from holoflow.geometry.pointcloud import (depth_gradient_mask, equirect_to_points, far_shell_radius,
                                               resample_rgbd, sky_to_shell)
     from holoflow.io.exr import read_exr, read_rgb
@@ -51,11 +55,19 @@ def main() -> int:
         col, d = resample_rgbd(srgb, depth, width)
         d = sky_to_shell(d, shell)
         keep = torch.ones_like(d, dtype=torch.bool)
+        layer = None
         if name == "pf":
             keep = depth_gradient_mask(d, threshold)
+            if cfg.layer_baseline > 0:     # the far side continued under the silhouettes
+                layer = background_layer(col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg)
             d = torch.where(keep, d, torch.full_like(d, float("nan")))
         area = name == "pf" and cfg.pf_sampling == "area"
-        xyz, c = (equirect_to_area_points if area else equirect_to_points)(col, d)
+        to_points = equirect_to_area_points if area else equirect_to_points
+        xyz, c = to_points(col, d)
+        if layer is not None:
+            lxyz, lc = layer_points(*layer)
+            xyz, c = torch.cat([xyz, lxyz]), torch.cat([c, lc])
+            counts["pf_layer"] = int(len(lxyz))
         rgb8 = (c.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).numpy()
         write_points(job.output(f"{name}.ply"), xyz.float().numpy(), rgb8)
         counts[name] = int(xyz.shape[0])

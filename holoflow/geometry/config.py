@@ -31,6 +31,12 @@ class PointCloudParams(StageParams):
                                   "(paper 0.4)", ge=0)
     sky_radius: float = param(0.0, "far shell radius for unbounded pixels (0 = 2x the 99th percentile depth)",
                               "m", ge=0)
+    layer_baseline: float = param(1.0, "P_f gets a background layer: the far surface (and the sky shell) "
+                                  "continued under each silhouette as far as an eye move of this much uncovers "
+                                  "(holoflow/geometry/layers.py); 0 = none", "m", ge=0)
+    layer_tol: float = param(0.1, "background layer: relative depth step that counts as an occlusion edge",
+                             gt=0, lt=1)
+    layer_max_deg: float = param(30.0, "background layer: widest band under a silhouette", "deg", gt=0)
 
 
 @dataclass(frozen=True)

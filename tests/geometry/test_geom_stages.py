@@ -66,7 +66,8 @@ def test_point_cloud_stage(stage_outputs):
     meta = [json.loads(ln[6:]) for ln in pc.stdout.splitlines() if ln.startswith("@meta ")][0]
     assert abs(meta["sky_fraction"] - 8 / 64) < 1e-6
     xyzf, _ = read_points(out / "pf.ply")
-    assert 0 < len(xyzf) < 64 * 32 and len(xyzf) == meta["points"]["pf"]
+    layer = meta["points"]["pf_layer"]       # the background layer follows the filtered grid's points
+    assert 0 < len(xyzf) - layer < 64 * 32 and layer > 0 and len(xyzf) == meta["points"]["pf"]
     xyzs, _ = read_points(out / "ps.ply")
     assert len(xyzs) == 64 * 32
 

@@ -1,0 +1,126 @@
+"""The background layer (holoflow/geometry/layers.py): a synthetic step edge, the sky shell under a
+silhouette, and a box in front of a wall seen 0.5 m off centre with and without the layer."""
+import math
+
+import pytest
+import torch
+
+from holoflow.geometry.camera import intrinsics_from_fov, look_at, pinhole_rays
+from holoflow.geometry.layers import background_layer, layer_points
+from holoflow.geometry.pointcloud import depth_gradient_mask, equirect_to_points, footprint_radius, project_points_zbuffer
+from holoflow.geometry.sphere import equirect_directions
+
+RED, BLUE = torch.tensor([1.0, 0.0, 0.0]), torch.tensor([0.0, 0.0, 1.0])
+
+
+def step_edge(H=64, W=128, near=2.0, far=4.0):
+    """A red far wall at ``far`` m with a blue slab at ``near`` m over columns 40..59; P_f's mask."""
+    d = torch.full((H, W), far, dtype=torch.float64)
+    d[:, 40:60] = near
+    rgb = RED.expand(H, W, 3).clone()
+    rgb[:, 40:60] = BLUE
+    return rgb, d, depth_gradient_mask(d, 0.4)
+
+
+def test_step_edge_band_width_depth_and_colour():
+    rgb, d, keep = step_edge()
+    assert keep[:, 39].all() and not keep[:, 40].any() and not keep[:, 59].any()   # the near side's edge is dropped
+    step = 2 * math.pi / 128
+    for baseline in (0.5, 1.0):
+        ld, lc = background_layer(rgb, d, keep, baseline)
+        row = torch.isfinite(ld[32])
+        # the band a move of `baseline` uncovers, baseline (1/2 - 1/4) rad (+ the dropped edge pixel),
+        # counted from the last far pixel (39 and 60)
+        width = int(baseline * (1 / 2 - 1 / 4) / step + 1)
+        assert width >= 3
+        assert row[40:40 + width].all() and not row[40 + width:60 - width].any()
+        assert row[60 - width:60].all() and not row[:40].any() and not row[60:].any()
+        torch.testing.assert_close(ld[32][row], torch.full_like(ld[32][row], 4.0))   # the far wall's depth
+        torch.testing.assert_close(lc[32][row], RED.expand(int(row.sum()), 3))       # the far wall's colour
+    assert not torch.isfinite(background_layer(rgb, d, keep, 0.0)[0][8:56, 42:58]).any()   # off the poles
+
+
+def test_layer_extends_a_slanted_far_surface_in_inverse_depth():
+    # far surface whose inverse depth falls linearly with the column: the layer continues the line
+    H, W = 32, 128
+    cols = torch.arange(W, dtype=torch.float64)
+    inv = 0.25 - 0.001 * cols
+    d = (1.0 / inv).expand(H, W).clone()
+    d[:, 40:60] = 1.5
+    rgb = RED.expand(H, W, 3).clone()
+    keep = depth_gradient_mask(d, 0.4)
+    ld, _ = background_layer(rgb, d, keep, 1.0)
+    band = torch.isfinite(ld[16])
+    band[50:] = False                                              # the left edge's side only (the seam,
+    band[:30] = False                                              # where inverse depth jumps, has its own)
+    c = cols[band]
+    assert len(c) >= 5
+    torch.testing.assert_close(1.0 / ld[16][band], 0.25 - 0.001 * c, rtol=1e-9, atol=1e-12)
+
+
+def test_sky_shell_continues_under_a_silhouette():
+    # an object at 3 m against sky already put on a 100 m shell: the shell grows under its edge
+    H, W = 64, 128
+    d = torch.full((H, W), 100.0, dtype=torch.float64)
+    d[20:44, 50:78] = 3.0
+    rgb = torch.rand(H, W, 3, generator=torch.Generator().manual_seed(0))
+    ld, _ = background_layer(rgb, d, depth_gradient_mask(d, 0.4), 1.0)
+    under = torch.isfinite(ld[20:44, 50:78])
+    assert under[:, :4].all() and under[:, -4:].all() and under[:4].all() and under[-4:].all()
+    torch.testing.assert_close(ld[torch.isfinite(ld)], torch.full_like(ld[torch.isfinite(ld)], 100.0))
+
+
+ROOM = torch.tensor([3.0, 2.0, 3.0], dtype=torch.float64)                  # half sizes (m)
+BOX = (torch.tensor([-0.3, -0.5, 1.5], dtype=torch.float64), torch.tensor([0.3, 0.5, 2.0], dtype=torch.float64))
+
+
+def cast(origins, dirs):
+    """Ray cast (origins, unit dirs [..., 3], inside the room) into a 6 x 4 x 6 m room with a 0.6 x 1 x
+    0.5 m box 1.5 m in front of the centre (z): (distance [...] m, hit the box [...] bool)."""
+    inv = 1.0 / torch.where(dirs.abs() < 1e-12, torch.full_like(dirs, 1e-12), dirs)
+    t_room = ((torch.sign(inv) * ROOM - origins) * inv).amin(-1)              # exit of the room
+    t1, t2 = (BOX[0] - origins) * inv, (BOX[1] - origins) * inv
+    t_in, t_out = torch.minimum(t1, t2).amax(-1), torch.maximum(t1, t2).amin(-1)
+    box = (t_in < t_out) & (t_in > 0)
+    return torch.where(box, t_in, t_room), box
+
+
+def room_with_box(H, W):
+    """The analytic RGB-D panorama of ``cast`` from the origin: rgb [H, W, 3] (walls in 0.5 m stripes,
+    the box blue), radial depth [H, W]."""
+    dirs = equirect_directions(H, W, dtype=torch.float64)                     # [H, W, 3]
+    depth, box = cast(torch.zeros_like(dirs), dirs)
+    x = dirs * depth[..., None]
+    stripe = (torch.floor(2 * (x[..., 0] + x[..., 1] + x[..., 2])) % 2)[..., None]
+    wall = 0.3 + 0.5 * stripe * torch.tensor([1.0, 0.8, 0.2], dtype=torch.float64)
+    return torch.where(box[..., None], BLUE.double(), wall), depth
+
+
+@pytest.mark.parametrize("with_layer", [True, False])
+def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
+    """P_f (gradient filter, plus the layer) seen from 0.5 m right of the centre, looking past the box: no
+    pixel whose wall the box hides from the centre is empty with the layer; without it they are."""
+    H, W = 128, 256
+    rgb, depth = room_with_box(H, W)
+    keep = depth_gradient_mask(depth, 0.4)
+    xyz, col = equirect_to_points(rgb, torch.where(keep, depth, torch.full_like(depth, float("nan"))))
+    if with_layer:
+        lxyz, lcol = layer_points(*background_layer(rgb, depth, keep, 1.0))
+        xyz, col = torch.cat([xyz, lxyz]), torch.cat([col, lcol])
+    size = 96
+    K = intrinsics_from_fov(47.43, size, size, dtype=torch.float64)
+    eye = torch.tensor([[0.5, 0.0, 0.0]], dtype=torch.float64)
+    V = look_at(eye, eye + torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64))[0]
+    o, d = pinhole_rays(K, V, size, size)                                   # [H, W, 3] each
+    t, on_box = cast(o, d)
+    X = o + t[..., None] * d                                                # what the camera sees
+    r = torch.linalg.vector_norm(X, dim=-1)
+    hidden = ~on_box & (cast(torch.zeros_like(X), X / r[..., None])[0] < r - 1e-6)   # the box hides it
+    assert hidden.double().mean() > 0.03
+    radius = footprint_radius(xyz, V, K, 2 * math.pi / W)
+    _, hit, _ = project_points_zbuffer(xyz, col, K, V, size, size, radius)
+    empty = (hit < 0.5) & hidden
+    if with_layer:
+        assert not empty.any()
+    else:
+        assert empty.double().sum() > 0.3 * hidden.double().sum()
