@@ -28,7 +28,7 @@ def main() -> int:
 
     from holoflow.geometry.area import equirect_to_area_points, view_width
     from holoflow.geometry.config import PointCloudParams
-    from holoflow.geometry.layers import background_layer, layer_points
+    from holoflow.geometry.layers import background_layer
     from holoflow.geometry.pointcloud import (depth_gradient_mask, equirect_to_points, far_shell_radius,
                                               resample_rgbd, sky_to_shell)
     from holoflow.io.exr import read_exr, read_rgb
@@ -65,7 +65,7 @@ def main() -> int:
         to_points = equirect_to_area_points if area else equirect_to_points
         xyz, c = to_points(col, d)
         if layer is not None:
-            lxyz, lc = layer_points(*layer)
+            lxyz, lc = equirect_to_points(layer[1], layer[0])
             xyz, c = torch.cat([xyz, lxyz]), torch.cat([c, lc])
             counts["pf_layer"] = int(len(lxyz))
         rgb8 = (c.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).numpy()

@@ -37,7 +37,6 @@ import numpy as np
 import torch
 from numba import njit
 
-from holoflow.geometry.sphere import equirect_directions
 
 MAX_DEPTH_RATIO = 1.5     # extrapolated layer depth stays within this factor of the edge's own depth
 
@@ -51,7 +50,8 @@ def background_layer(rgb: torch.Tensor, radial_depth: torch.Tensor, source: torc
     P_f's kept pixels); baseline:
     the largest eye move (m) whose disocclusions the layer must cover; tol: relative depth step that
     counts as an occlusion edge; max_deg: cap on the band's width. Returns (layer depth [H, W] metres,
-    inf where the pixel has no layer; layer colour [H, W, C], 0 there)."""
+    inf where the pixel has no layer; layer colour [H, W, C], 0 there): an equirect RGB-D image whose
+    points (``pointcloud.equirect_to_points``, which skips inf) are the layer."""
     H, W = radial_depth.shape
     d = radial_depth.detach().cpu().double().numpy()
     src = source.detach().cpu().numpy().astype(np.bool_) & np.isfinite(d) & (d > 0)
@@ -67,15 +67,6 @@ def background_layer(rgb: torch.Tensor, radial_depth: torch.Tensor, source: torc
           math.radians(max_deg), out_d, out_c)
     return (torch.from_numpy(out_d).to(radial_depth.dtype).to(radial_depth.device),
             torch.from_numpy(out_c).to(rgb.dtype).to(rgb.device))
-
-
-def layer_points(layer_depth: torch.Tensor, layer_rgb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """xyz [N, 3] (world, metres) and colours [N, C] of the pixels that have a layer value (finite depth),
-    row-major like ``pointcloud.equirect_to_points``."""
-    H, W = layer_depth.shape
-    dirs = equirect_directions(H, W, device=layer_depth.device, dtype=layer_depth.dtype)   # [H, W, 3]
-    has = torch.isfinite(layer_depth)
-    return dirs[has] * layer_depth[has][:, None], layer_rgb[has]
 
 
 @njit(cache=True)

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from holoflow.geometry.camera import intrinsics_from_fov, look_at, pinhole_rays
-from holoflow.geometry.layers import background_layer, layer_points
+from holoflow.geometry.layers import background_layer
 from holoflow.geometry.pointcloud import depth_gradient_mask, equirect_to_points, footprint_radius, project_points_zbuffer
 from holoflow.geometry.sphere import equirect_directions
 
@@ -105,7 +105,8 @@ def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
     keep = depth_gradient_mask(depth, 0.4)
     xyz, col = equirect_to_points(rgb, torch.where(keep, depth, torch.full_like(depth, float("nan"))))
     if with_layer:
-        lxyz, lcol = layer_points(*background_layer(rgb, depth, keep, 1.0))
+        ld, lc = background_layer(rgb, depth, keep, 1.0)
+        lxyz, lcol = equirect_to_points(lc, ld)
         xyz, col = torch.cat([xyz, lxyz]), torch.cat([col, lcol])
     size = 96
     K = intrinsics_from_fov(47.43, size, size, dtype=torch.float64)
