@@ -59,7 +59,8 @@ def main() -> int:
         if name == "pf":
             keep = depth_gradient_mask(d, threshold)
             if cfg.layer_baseline > 0:     # the far side continued under the silhouettes
-                layer = background_layer(col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg)
+                layer = background_layer(col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg,
+                                         cfg.layer_stride)
             d = torch.where(keep, d, torch.full_like(d, float("nan")))
         area = name == "pf" and cfg.pf_sampling == "area"
         to_points = equirect_to_area_points if area else equirect_to_points

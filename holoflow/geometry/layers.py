@@ -42,14 +42,16 @@ MAX_DEPTH_RATIO = 1.5     # extrapolated layer depth stays within this factor of
 
 
 def background_layer(rgb: torch.Tensor, radial_depth: torch.Tensor, source: torch.Tensor, baseline: float,
-                     tol: float = 0.1, max_deg: float = 30.0) -> tuple[torch.Tensor, torch.Tensor]:
+                     tol: float = 0.1, max_deg: float = 30.0, stride: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
     """The far surfaces continued under the near silhouettes (module docstring).
 
     rgb [H, W, C] (any colour space: it is averaged), radial_depth [H, W] metres (finite > 0 wherever
     ``source``; the unfiltered depth elsewhere), source [H, W] bool (pixels whose own surface is known:
     P_f's kept pixels); baseline:
     the largest eye move (m) whose disocclusions the layer must cover; tol: relative depth step that
-    counts as an occlusion edge; max_deg: cap on the band's width. Returns (layer depth [H, W] metres,
+    counts as an occlusion edge; max_deg: cap on the band's width; stride: keep the layer on every
+    stride-th row and column only (the layer is seen from off the centre only: sparser points, whose
+    Gaussians start larger, cost less training). Returns (layer depth [H, W] metres,
     inf where the pixel has no layer; layer colour [H, W, C], 0 there): an equirect RGB-D image whose
     points (``pointcloud.equirect_to_points``, which skips inf) are the layer."""
     H, W = radial_depth.shape
@@ -65,6 +67,11 @@ def background_layer(rgb: torch.Tensor, radial_depth: torch.Tensor, source: torc
     out_c = np.zeros_like(col)
     _grow(d, src, near, col, np.cos(lat), 2 * math.pi / W, float(baseline), float(tol),
           math.radians(max_deg), out_d, out_c)
+    if stride > 1:
+        sparse = np.ones((H, W), bool)
+        sparse[::stride, ::stride] = False
+        out_d[sparse] = np.inf
+        out_c[sparse] = 0.0
     return (torch.from_numpy(out_d).to(radial_depth.dtype).to(radial_depth.device),
             torch.from_numpy(out_c).to(rgb.dtype).to(rgb.device))
 

@@ -38,6 +38,9 @@ def test_step_edge_band_width_depth_and_colour():
         torch.testing.assert_close(ld[32][row], torch.full_like(ld[32][row], 4.0))   # the far wall's depth
         torch.testing.assert_close(lc[32][row], RED.expand(int(row.sum()), 3))       # the far wall's colour
     assert not torch.isfinite(background_layer(rgb, d, keep, 0.0)[0][8:56, 42:58]).any()   # off the poles
+    full = torch.isfinite(background_layer(rgb, d, keep, 1.0)[0])
+    sparse = torch.isfinite(background_layer(rgb, d, keep, 1.0, stride=2)[0])
+    assert torch.equal(sparse[::2, ::2], full[::2, ::2]) and int(sparse.sum()) == int(full[::2, ::2].sum())
 
 
 def test_layer_extends_a_slanted_far_surface_in_inverse_depth():
