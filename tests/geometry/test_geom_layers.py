@@ -132,7 +132,7 @@ def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
 
 @pytest.mark.parametrize("with_layer", [True, False])
 def test_box_scene_after_a_tiny_optimisation(with_layer):
-    """Gaussians from P_f (+ layer), 30 steps on the panorama's base views (holoflow's CPU rasterizer),
+    """Gaussians from P_f (+ the layer on every other row and column), 30 steps on the panorama's base views (holoflow's CPU rasterizer),
     rendered 0.5 m right of the centre: alpha >= 0.5 on every pixel the box hides from the centre with
     the layer; without it a good part of them stays empty (training from the centre cannot fill them)."""
     from holoflow.geometry.rigs import base_rig
@@ -144,7 +144,7 @@ def test_box_scene_after_a_tiny_optimisation(with_layer):
     keep = depth_gradient_mask(depth, 0.4)
     xyz, col = equirect_to_points(rgb, torch.where(keep, depth, torch.full_like(depth, float("nan"))))
     if with_layer:
-        ld, lc = background_layer(rgb, depth, keep, 1.0)
+        ld, lc = background_layer(rgb, depth, keep, 1.0, stride=2)       # the point_cloud stage's default
         lxyz, lcol = equirect_to_points(lc, ld)
         xyz, col = torch.cat([xyz, lxyz]), torch.cat([col, lcol])
     model = GaussianModel.from_points(xyz.numpy(), col.numpy(), opacity=0.5)
