@@ -37,7 +37,9 @@ class PointCloudParams(StageParams):
     layer_tol: float = param(0.1, "background layer: relative depth step that counts as an occlusion edge",
                              gt=0, lt=1)
     layer_max_deg: float = param(30.0, "background layer: widest band under a silhouette", "deg", gt=0)
-    layer_stride: int = param(2, "background layer: on every this-many-th row and column of P_f's grid", ge=1)
+    layer_stride: int = param(1, "background layer: on every this-many-th row and column of P_f's grid (2 only "
+                              "with init_scale knn: the footprint init sizes every point by the grid's spacing)",
+                              ge=1)
 
 
 @dataclass(frozen=True)

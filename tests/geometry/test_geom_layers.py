@@ -132,22 +132,24 @@ def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
 
 @pytest.mark.parametrize("with_layer", [True, False])
 def test_box_scene_after_a_tiny_optimisation(with_layer):
-    """Gaussians from P_f (+ the layer on every other row and column), 30 steps on the panorama's base views (holoflow's CPU rasterizer),
+    """Gaussians from P_f (+ layer), sized by their pixel's footprint as the trainers do, 30 steps on the panorama's base views (holoflow's CPU rasterizer),
     rendered 0.5 m right of the centre: alpha >= 0.5 on every pixel the box hides from the centre with
     the layer; without it a good part of them stays empty (training from the centre cannot fill them)."""
     from holoflow.geometry.rigs import base_rig
     from holoflow.geometry.sampling import equirect_to_pinhole
-    from holoflow.splat import GaussianModel, TrainConfig, render, train
+    from holoflow.recon.schedule import init_model
+    from holoflow.splat import TrainConfig, render, train
 
     H, W = 64, 128
     rgb, depth = room_with_box(H, W)
     keep = depth_gradient_mask(depth, 0.4)
     xyz, col = equirect_to_points(rgb, torch.where(keep, depth, torch.full_like(depth, float("nan"))))
     if with_layer:
-        ld, lc = background_layer(rgb, depth, keep, 1.0, stride=2)       # the point_cloud stage's default
+        ld, lc = background_layer(rgb, depth, keep, 1.0)
         lxyz, lcol = equirect_to_points(lc, ld)
         xyz, col = torch.cat([xyz, lxyz]), torch.cat([col, lcol])
-    model = GaussianModel.from_points(xyz.numpy(), col.numpy(), opacity=0.5)
+    model = init_model(xyz.numpy(), (col.numpy() * 255 + 0.5).astype("uint8"), 0.99,
+                       footprint=(2 * math.pi / W, 0.7, 0.1))          # transfer_opt's default init
     size = 32
     K = intrinsics_from_fov(90.0, size, size, dtype=torch.float32)
     V = base_rig(12, dtype=torch.float32)
