@@ -99,11 +99,9 @@ def room_with_box(H, W):
     return torch.where(box[..., None], BLUE.double(), wall), depth
 
 
-@pytest.mark.parametrize("with_layer", [True, False])
-def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
-    """P_f (gradient filter, plus the layer) seen from 0.5 m right of the centre, looking past the box: no
-    pixel whose wall the box hides from the centre is empty with the layer; without it they are."""
-    H, W = 128, 256
+def box_room_cloud(H: int, W: int, with_layer: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    """P_f of ``room_with_box`` (gradient-filtered grid points) and, with_layer, the background layer's
+    points behind the box's silhouette: xyz [N, 3], rgb [N, 3]."""
     rgb, depth = room_with_box(H, W)
     keep = depth_gradient_mask(depth, 0.4)
     xyz, col = equirect_to_points(rgb, torch.where(keep, depth, torch.full_like(depth, float("nan"))))
@@ -111,6 +109,15 @@ def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
         ld, lc = background_layer(rgb, depth, keep, 1.0)
         lxyz, lcol = equirect_to_points(lc, ld)
         xyz, col = torch.cat([xyz, lxyz]), torch.cat([col, lcol])
+    return xyz, col
+
+
+@pytest.mark.parametrize("with_layer", [True, False])
+def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
+    """P_f (gradient filter, plus the layer) seen from 0.5 m right of the centre, looking past the box: no
+    pixel whose wall the box hides from the centre is empty with the layer; without it they are."""
+    H, W = 128, 256
+    xyz, col = box_room_cloud(H, W, with_layer)
     size = 96
     K = intrinsics_from_fov(47.43, size, size, dtype=torch.float64)
     eye = torch.tensor([[0.5, 0.0, 0.0]], dtype=torch.float64)
@@ -132,8 +139,8 @@ def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
 
 @pytest.mark.parametrize("with_layer", [True, False])
 def test_box_scene_after_a_tiny_optimisation(with_layer):
-    """Gaussians from P_f (+ layer), sized by their pixel's footprint as the trainers do, 30 steps on the panorama's base views (holoflow's CPU rasterizer),
-    rendered 0.5 m right of the centre: alpha >= 0.5 on every pixel the box hides from the centre with
+    """Gaussians from P_f (+ layer), sized by their pixel's footprint as the trainers do, 30 steps on
+    the panorama's base views (holoflow's CPU rasterizer), rendered 0.5 m right of the centre: alpha >= 0.5 on every pixel the box hides from the centre with
     the layer; without it a good part of them stays empty (training from the centre cannot fill them)."""
     from holoflow.geometry.rigs import base_rig
     from holoflow.geometry.sampling import equirect_to_pinhole
@@ -141,18 +148,13 @@ def test_box_scene_after_a_tiny_optimisation(with_layer):
     from holoflow.splat import TrainConfig, render, train
 
     H, W = 64, 128
-    rgb, depth = room_with_box(H, W)
-    keep = depth_gradient_mask(depth, 0.4)
-    xyz, col = equirect_to_points(rgb, torch.where(keep, depth, torch.full_like(depth, float("nan"))))
-    if with_layer:
-        ld, lc = background_layer(rgb, depth, keep, 1.0)
-        lxyz, lcol = equirect_to_points(lc, ld)
-        xyz, col = torch.cat([xyz, lxyz]), torch.cat([col, lcol])
+    xyz, col = box_room_cloud(H, W, with_layer)
     model = init_model(xyz.numpy(), (col.numpy() * 255 + 0.5).astype("uint8"), 0.99,
                        footprint=(2 * math.pi / W, 0.7, 0.1))          # transfer_opt's default init
     size = 32
     K = intrinsics_from_fov(90.0, size, size, dtype=torch.float32)
     V = base_rig(12, dtype=torch.float32)
+    rgb, _ = room_with_box(H, W)
     images = equirect_to_pinhole(rgb.permute(2, 0, 1).float(), K.expand(12, 3, 3), V, size, size)   # [12, 3, s, s]
     views = [dict(image=im.permute(1, 2, 0).contiguous(), mask=None, viewmat=v, K=K) for im, v in zip(images, V)]
     train(model, views, TrainConfig(iterations=30, densify_every=10, densify_from=5, densify_until=20,
