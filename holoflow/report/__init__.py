@@ -40,7 +40,7 @@ def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str
     scene = run.run_dir / "transfer_opt" / "scene.ply"
     if view_size > 0 and scene.is_file():
         from holoflow.flow.store import read_json
-        from holoflow.recon.viewing import ViewingSpec, score_run
+        from holoflow.evaluation.viewing import ViewingSpec, score_run
         from holoflow.report.viewing import section_html
 
         info = read_json(run.run_dir / "run.json") or {}
