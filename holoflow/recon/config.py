@@ -65,6 +65,13 @@ class TransferOptParams(OptimParams):
                        "keeps 1.25x)", "iters", ge=0)
     use_inp: bool = param(True, "false = transfer on the PANO set only (the paper's ablation)")
     preview_size: int = param(96, "side of the look-around preview renders", "px", ge=1)
+    fit_size: int = param(384, "colour fit after training: the base cameras at this view size, targets from "
+                          "the detail panorama (holoflow/recon/colour_fit.py); 384 px at 47.43 deg is as fine "
+                          "as a 2915 px panorama, past the preview's 1536 px P_f (512: +0.0 dB at 512 px on "
+                          "evl_room_B, 256: -0.5 dB)", "px", ge=8)
+    fit_iters: int = param(1, "colour fit passes over the base cameras at fit_size (0 = none, the paper); "
+                           "each is one render and one backward of every base view", "passes", ge=0)
+    fit_relax: float = param(1.0, "colour fit step: 1 = the full weight-normalised residual (SART)", gt=0, lt=2)
 
 
 @dataclass(frozen=True)
