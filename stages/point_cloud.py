@@ -63,7 +63,8 @@ def main() -> int:
                                          cfg.layer_stride)
             d = torch.where(keep, d, torch.full_like(d, float("nan")))
         area = name == "pf" and cfg.pf_sampling == "area"
-        xyz, c = equirect_to_area_points(col, d, cfg.pf_pole_cos) if area else equirect_to_points(col, d)
+        to_points = equirect_to_area_points if area else equirect_to_points
+        xyz, c = to_points(col, d)
         if layer is not None:
             lxyz, lc = equirect_to_points(layer[1], layer[0])
             xyz, c = torch.cat([xyz, lxyz]), torch.cat([c, lc])
@@ -75,8 +76,7 @@ def main() -> int:
             counts["pf_dropped_fraction"] = round(float((~keep).double().mean()), 6)
         job.progress(i + 1, 3, "clouds")
     job.output("pf.json").write_text(json.dumps({"width": pf_width, "sampling": cfg.pf_sampling,
-                                                 "spacing_rad": 2 * math.pi / pf_width,
-                                                 "min_cos": cfg.pf_pole_cos if cfg.pf_sampling == "area" else 0.0}, sort_keys=True))
+                                                 "spacing_rad": 2 * math.pi / pf_width}, sort_keys=True))
     job.meta(pf_width=pf_width, pf_sampling=cfg.pf_sampling, points=counts, sky_fraction=round(sky_fraction, 6),
              shell_radius=round(shell, 6), grad_threshold=threshold, depth_size=list(depth.shape))
     print(f"point_cloud: {counts}, shell radius {shell:.3f} m, sky {100 * sky_fraction:.2f}%")

@@ -12,13 +12,6 @@ is invented across an edge. The total is about W H 2 / pi points, 64 % of the gr
 A point at radial distance r then covers a patch r d wide facing the centre: its Gaussian gets
 standard deviation ``width`` x r d along the two tangent axes and ``thickness`` x r d along the ray
 (flattened: a disc facing the panorama centre), so neighbours cover each other at any view size.
-
-Near the poles a photo holds more than that: its rows are still W pixels round, so a view of the
-zenith sees detail ``1 / cos(lat)`` times finer along the rings than across them, which d x d points
-cannot carry (the zenith and nadir views scored several dB below the others). With ``min_cos`` > 0
-a row keeps ``W max(cos lat, min_cos)`` points: the rows within acos(min_cos) of a pole keep
-their rings' finer detail, and each point's footprint there narrows along the ring to the arc it
-covers (``d cos(lat) / min_cos``; ``footprint_gaussians``), oriented east / north / radial.
 """
 from __future__ import annotations
 
@@ -29,22 +22,19 @@ import torch
 from holoflow.geometry.sphere import lonlat_to_direction
 
 
-def area_counts(height: int, width: int, min_cos: float = 0.0) -> torch.Tensor:
-    """Points per row [H] (long) of an area sampling of an H x W equirect grid: round(W max(cos lat,
-    min_cos)), at least 1 (module docstring)."""
+def area_counts(height: int, width: int) -> torch.Tensor:
+    """Points per row [H] (long) of an area sampling of an H x W equirect grid (module docstring)."""
     lat = math.pi / 2 - (torch.arange(height, dtype=torch.float64) + 0.5) * (math.pi / height)
-    return torch.clamp(torch.round(width * torch.clamp(torch.cos(lat), min=min_cos)), min=1).long()
+    return torch.clamp(torch.round(width * torch.cos(lat)), min=1).long()
 
 
-def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, min_cos: float = 0.0
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Area sampling of an equirect RGB-D image (``min_cos``: module docstring): rgb [H, W, C],
-    radial_depth [H, W] (metres) ->
+def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Area sampling of an equirect RGB-D image: rgb [H, W, C], radial_depth [H, W] (metres) ->
     directions [N, 3] (unit, world), rgb [N, C] (box average over each point's longitude interval)
     and depth [N] (the pixel under the point; not filtered here), rows top to bottom, longitudes
     ascending from -pi."""
     H, W = radial_depth.shape
-    counts = area_counts(H, W, min_cos).to(rgb.device)                                   # [H]
+    counts = area_counts(H, W).to(rgb.device)                                   # [H]
     row = torch.repeat_interleave(torch.arange(H, device=rgb.device), counts)   # [N]
     first = torch.cumsum(counts, 0) - counts
     j = torch.arange(int(counts.sum()), device=rgb.device) - first[row]         # index within the row
@@ -65,38 +55,29 @@ def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, min_cos: float = 
     return dirs, colour, depth
 
 
-def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, min_cos: float = 0.0
-                            ) -> tuple[torch.Tensor, torch.Tensor]:
+def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """``equirect_to_points`` sampled by area: xyz [N, 3] (world, depth's dtype) and rgb [N, C] of the
     area samples with finite depth > 0 (module docstring)."""
-    dirs, colour, depth = area_sample(rgb, radial_depth, min_cos)
+    dirs, colour, depth = area_sample(rgb, radial_depth)
     valid = torch.isfinite(depth) & (depth > 0)
     return dirs[valid] * depth[valid][:, None], colour[valid]
 
 
-def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.6, thickness: float = 0.1,
-                        min_cos: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
+def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.6, thickness: float = 0.1
+                        ) -> tuple[torch.Tensor, torch.Tensor]:
     """Scales [N, 3] (metres) and quaternions [N, 4] (w, x, y, z) of Gaussians at points xyz [N, 3]
     sampled from the panorama centre (the origin) with angular spacing ``spacing_rad``: standard
-    deviation ``width`` x r spacing along the meridian (local y, north), the same times
-    min(1, cos(lat) / min_cos) along the ring (local x, east; ``min_cos`` of the sampling, module
-    docstring; 0: isotropic), ``thickness`` x r spacing along the ray (local z). r is clamped away
-    from 0; at the poles themselves east is taken as world +x."""
-    from holoflow.geometry.camera import rotmat_to_quat
-
+    deviation ``width`` x r spacing along the tangent axes, ``thickness`` x r spacing along the ray
+    (local z turned onto the ray). r is clamped away from 0."""
     r = torch.linalg.vector_norm(xyz, dim=-1).clamp_min(1e-9)                   # [N]
-    d = xyz / r[:, None]                                                        # [N, 3] unit, outwards
+    d = xyz / r[:, None]
     s = r * spacing_rad
-    ring = torch.ones_like(r)
-    if min_cos > 0:
-        coslat = torch.sqrt((1 - d[:, 1] ** 2).clamp_min(0.0))                  # world +y is down
-        ring = torch.clamp(coslat / min_cos, max=1.0)
-    scales = torch.stack([width * s * ring, width * s, thickness * s], -1)
-    east = torch.stack([d[:, 2], torch.zeros_like(r), -d[:, 0]], -1)            # down x d, horizontal
-    n = torch.linalg.vector_norm(east, dim=-1, keepdim=True)
-    east = torch.where(n > 1e-9, east / n.clamp_min(1e-30), east.new_tensor([1.0, 0.0, 0.0]))
-    north = torch.linalg.cross(d, east)
-    return scales, rotmat_to_quat(torch.stack([east, north, d], -1))            # columns: local x, y, z
+    scales = torch.stack([width * s, width * s, thickness * s], -1)
+    # the shortest rotation taking +z to d: q = (1 + d_z, -d_y, d_x, 0), normalised; d = -z: 180 deg about x
+    q = torch.stack([1 + d[:, 2], -d[:, 1], d[:, 0], torch.zeros_like(r)], -1)
+    flip = (1 + d[:, 2]) < 1e-9
+    q = torch.where(flip[:, None], q.new_tensor([0.0, 1.0, 0.0, 0.0]), q)
+    return scales, q / torch.linalg.vector_norm(q, dim=-1, keepdim=True)
 
 
 def view_width(size: int, fov_deg: float) -> int:

@@ -23,10 +23,6 @@ class PointCloudParams(StageParams):
     pf_sampling: str = param("area", "P_f's points: area = rows thinned by cos(lat), so every point covers "
                              "the same solid angle (no rings of thin Gaussians at the poles); grid = one "
                              "per pixel (the paper)", choices=("area", "grid"))
-    pf_pole_cos: float = param(0.0, "pf_sampling area: rows keep W max(cos lat, this) points, so the rows "
-                               "within acos(this) of a pole keep the finer detail along their rings, with "
-                               "footprints narrowed to match (holoflow/geometry/area.py); 0 = cos(lat) everywhere",
-                               ge=0, le=1)
     view_size: int = param(512, "pf_width 0: the view size P_f must stay sharp at (paper 512)", "px", ge=1)
     view_fov_deg: float = param(47.43, "pf_width 0: that view's field of view (paper 47.43)", "deg", gt=0,
                                 lt=180)

@@ -77,28 +77,3 @@ def test_footprint_discs_face_the_centre(d):
     assert torch.allclose(scales, torch.tensor([[0.018, 0.018, 0.003]], dtype=torch.float64))
     R = quat_to_rotmat(q)[0]
     assert torch.allclose(R[:, 2], xyz[0] / 3.0, atol=1e-12)                  # local z along the ray
-
-
-def test_polar_rows_keep_more_points_with_narrower_footprints():
-    """min_cos: rows within acos(min_cos) of a pole keep W min_cos points (the rest as before), and their
-    footprints narrow along the ring (local x: horizontal, east) by cos(lat) / min_cos, across it not."""
-    from holoflow.geometry.camera import quat_to_rotmat
-
-    H, W = 64, 128
-    lat = math.pi / 2 - (torch.arange(H, dtype=torch.float64) + 0.5) * (math.pi / H)
-    plain, polar = area_counts(H, W), area_counts(H, W, 0.5)
-    low = torch.cos(lat) < 0.5
-    assert torch.equal(polar[~low], plain[~low])
-    assert torch.equal(polar[low], torch.full_like(polar[low], 64))
-    _, _, depth = area_sample(torch.zeros(H, W, 3), torch.ones(H, W), 0.5)
-    assert len(depth) == int(polar.sum())
-    el = math.radians(75.0)                                       # 75 deg up (world +y is down)
-    xyz = torch.tensor([[0.0, -math.sin(el), math.cos(el)], [math.cos(el), 0.0, math.sin(el)]], dtype=torch.float64)
-    scales, q = footprint_gaussians(2.0 * xyz, 0.01, 0.6, 0.1, min_cos=0.5)
-    ring = math.cos(el) / 0.5
-    assert torch.allclose(scales[0], torch.tensor([0.012 * ring, 0.012, 0.002], dtype=torch.float64))
-    assert torch.allclose(scales[1], torch.tensor([0.012, 0.012, 0.002], dtype=torch.float64))   # on the horizon
-    R = quat_to_rotmat(q)
-    assert torch.allclose(R[:, :, 2], xyz, atol=1e-12)                     # local z along the ray
-    assert torch.allclose(R[:, 1, 0], torch.zeros(2, dtype=torch.float64), atol=1e-12)   # local x horizontal
-    assert torch.allclose(torch.linalg.det(R), torch.ones(2, dtype=torch.float64))
