@@ -4,7 +4,8 @@ P0 at ``p0_width`` (paper: the depth resolution, 4096); P_f at ``pf_width`` (pap
 a ``view_size`` view resolves, capped at the panorama's width and ``pf_max_width``), sampled by area (``pf_sampling``:
 holoflow/geometry/area.py; pf.json records its angular spacing for the Gaussians' footprints), with the
 points whose relative depth gradient exceeds ``grad_threshold`` (paper 0.4) dropped (definition and
-units: holoflow/geometry/pointcloud.py, docs/conventions.md); P_s at ``ps_width`` (paper 1024), the
+units: holoflow/geometry/pointcloud.py, docs/conventions.md) once the occlusion edges that the depth
+draws as ramps are made steps (``edge_radius``: holoflow/geometry/edges.py); P_s at ``ps_width`` (paper 1024), the
 cloud the PCD set is projected from. Sky (inf depth) goes on a far shell of radius ``sky_radius``
 (0 = 2 x the 99th percentile of finite depth) so the scene stays enclosed. P_f also holds a
 background layer (``layer_baseline`` > 0), after its grid's points: the far surface and the sky
@@ -28,6 +29,7 @@ def main() -> int:
 
     from holoflow.geometry.area import equirect_to_area_points, view_width
     from holoflow.geometry.config import PointCloudParams
+    from holoflow.geometry.edges import snap_depth_edges
     from holoflow.geometry.layers import background_layer
     from holoflow.geometry.pointcloud import (depth_gradient_mask, equirect_to_points, far_shell_radius,
                                               resample_rgbd, sky_to_shell)
@@ -57,10 +59,11 @@ def main() -> int:
         keep = torch.ones_like(d, dtype=torch.bool)
         layer = None
         if name == "pf":
+            d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
             keep = depth_gradient_mask(d, threshold)
             if cfg.layer_baseline > 0:     # the far side continued under the silhouettes
                 layer = background_layer(col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg,
-                                         cfg.layer_stride)
+                                         cfg.layer_stride, cfg.layer_slope)
             d = torch.where(keep, d, torch.full_like(d, float("nan")))
         area = name == "pf" and cfg.pf_sampling == "area"
         to_points = equirect_to_area_points if area else equirect_to_points

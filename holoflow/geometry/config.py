@@ -31,12 +31,23 @@ class PointCloudParams(StageParams):
                                   "(paper 0.4)", ge=0)
     sky_radius: float = param(0.0, "far shell radius for unbounded pixels (0 = 2x the 99th percentile depth)",
                               "m", ge=0)
+    edge_radius: int = param(2, "P_f: occlusion edges drawn as ramps by the depth are made steps, each ramp "
+                             "pixel moved onto the near or far side within a window this many px around it "
+                             "(holoflow/geometry/edges.py), before the gradient filter and the layer; 0 = off",
+                             "px", ge=0)
+    edge_ratio: float = param(0.25, "edge_radius: far / near - 1 across a window that makes it an edge (a "
+                              "smooth surface spanning less is never touched; pixels within layer_tol of "
+                              "either end stay)", gt=0)
+    edge_rounds: int = param(2, "edge_radius: passes (a ramp wider than the window needs two)", ge=1)
     layer_baseline: float = param(1.0, "P_f gets a background layer: the far surface (and the sky shell) "
                                   "continued under each silhouette as far as an eye move of this much uncovers "
                                   "(holoflow/geometry/layers.py); 0 = none", "m", ge=0)
     layer_tol: float = param(0.1, "background layer: relative depth step that counts as an occlusion edge",
                              gt=0, lt=1)
     layer_max_deg: float = param(30.0, "background layer: widest band under a silhouette", "deg", gt=0)
+    layer_slope: bool = param(False, "background layer: extrapolate the far surface's inverse-depth slope from "
+                              "the two pixels at the edge (off: the edge pixel's depth; an estimated depth's "
+                              "edge pixels are rarely the far surface's own)")
     layer_stride: int = param(1, "background layer: on every this-many-th row and column of P_f's grid (2 only "
                               "with init_scale knn: the footprint init sizes every point by the grid's spacing)",
                               ge=1)

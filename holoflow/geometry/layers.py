@@ -17,11 +17,14 @@ source pixels themselves, each carrying its own surface) when that value lies be
 surface by more than ``tol`` (relative) and the pixel is within the band of that value. Among the
 candidates within ``tol`` of the farthest depth, the one with the shortest path from its edge
 carries on, and their colours are averaged (the far side's colour, streaked along the front; never
-the near object's). Depth is extrapolated
+the near object's). The layer keeps the depth of its edge pixel, or with ``slope`` is extrapolated
 linearly in inverse depth along the growth direction from the two source pixels at the edge (planes
 stay nearly planar: 1 / depth is affine along an image line under a pinhole; on the sphere locally),
-clamped to within a factor 1.5 of the edge's own depth, and the band is measured in angle on the
-sphere (a column step is cos(latitude) x a row step).
+clamped to within a factor 1.5 of the edge's own depth. Off by default: on an estimated depth map
+the two pixels at an edge are rarely the far surface's own (a ramp, noise), and their slope throws
+the layer away from the surface it continues (evl_room_B 0.5 m off centre: P_f's initial Gaussians
+3.7 % empty without the ramps snapped, 0.3 % with them, 1.6 % with them and the slope; holoflow/geometry/edges.py).
+The band is measured in angle on the sphere (a column step is cos(latitude) x a row step).
 
 Pixels that are not sources (P_f's dropped edge pixels, whose depth mixes both sides) count as lying
 at the nearest depth of their 3 x 3 neighbourhood: they sit on the silhouette and the far surface
@@ -42,14 +45,16 @@ MAX_DEPTH_RATIO = 1.5     # extrapolated layer depth stays within this factor of
 
 
 def background_layer(rgb: torch.Tensor, radial_depth: torch.Tensor, source: torch.Tensor, baseline: float,
-                     tol: float = 0.1, max_deg: float = 30.0, stride: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
+                     tol: float = 0.1, max_deg: float = 30.0, stride: int = 1, slope: bool = False
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
     """The far surfaces continued under the near silhouettes (module docstring).
 
     rgb [H, W, C] (any colour space: it is averaged), radial_depth [H, W] metres (finite > 0 wherever
     ``source``; the unfiltered depth elsewhere), source [H, W] bool (pixels whose own surface is known:
     P_f's kept pixels); baseline:
     the largest eye move (m) whose disocclusions the layer must cover; tol: relative depth step that
-    counts as an occlusion edge; max_deg: cap on the band's width; stride: keep the layer on every
+    counts as an occlusion edge; max_deg: cap on the band's width; slope: extrapolate the far
+    surface's inverse-depth slope (module docstring); stride: keep the layer on every
     stride-th row and column only (the layer is seen from off the centre only: sparser points, whose
     Gaussians start larger, cost less training). Returns (layer depth [H, W] metres,
     inf where the pixel has no layer; layer colour [H, W, C], 0 there): an equirect RGB-D image whose
@@ -66,7 +71,7 @@ def background_layer(rgb: torch.Tensor, radial_depth: torch.Tensor, source: torc
     out_d = np.full((H, W), np.inf)
     out_c = np.zeros_like(col)
     _grow(d, src, near, col, np.cos(lat), 2 * math.pi / W, float(baseline), float(tol),
-          math.radians(max_deg), out_d, out_c)
+          math.radians(max_deg), out_d, out_c, slope)
     if stride > 1:
         sparse = np.ones((H, W), bool)
         sparse[::stride, ::stride] = False
@@ -77,7 +82,7 @@ def background_layer(rgb: torch.Tensor, radial_depth: torch.Tensor, source: torc
 
 
 @njit(cache=True)
-def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c):
+def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c, use_slope):
     """The growth rounds of ``background_layer``; fills out_d [H, W] (layer depth, inf = none) and
     out_c [H, W, C] in place."""
     H, W = d.shape
@@ -134,7 +139,7 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c)
                         i0 = 1.0 / d[qy, qx]
                         s = 0.0                     # continue the far surface's slope when it is smooth
                         ry, rx = qy + dy, (qx + dx) % W          # the next pixel beyond q, away from p
-                        if 0 <= ry < H and src[ry, rx] and abs(d[ry, rx] / d[qy, qx] - 1.0) < tol:
+                        if use_slope and 0 <= ry < H and src[ry, rx] and abs(d[ry, rx] / d[qy, qx] - 1.0) < tol:
                             s = i0 - 1.0 / d[ry, rx]
                         k = 1.0
                         a0 = 0.0

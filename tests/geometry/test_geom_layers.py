@@ -44,7 +44,7 @@ def test_step_edge_band_width_depth_and_colour():
 
 
 def test_layer_extends_a_slanted_far_surface_in_inverse_depth():
-    # far surface whose inverse depth falls linearly with the column: the layer continues the line
+    # far surface whose inverse depth falls linearly with the column: with slope the layer continues the line
     H, W = 32, 128
     cols = torch.arange(W, dtype=torch.float64)
     inv = 0.25 - 0.001 * cols
@@ -52,7 +52,7 @@ def test_layer_extends_a_slanted_far_surface_in_inverse_depth():
     d[:, 40:60] = 1.5
     rgb = RED.expand(H, W, 3).clone()
     keep = depth_gradient_mask(d, 0.4)
-    ld, _ = background_layer(rgb, d, keep, 1.0)
+    ld, _ = background_layer(rgb, d, keep, 1.0, slope=True)
     band = torch.isfinite(ld[16])
     band[50:] = False                                              # the left edge's side only (the seam,
     band[:30] = False                                              # where inverse depth jumps, has its own)

@@ -1,0 +1,47 @@
+"""Depth edges made steps: the pixels of a ramp between a near and a far surface moved onto one side.
+
+A depth estimator (and resampling) draws an occlusion edge as a ramp a few pixels wide: the pixels
+between a door frame at 1.0 m and the wall at 1.6 m hold 1.04, 1.15, 1.35, 1.5 m. As points those
+pixels are a curtain of discs strung between the two surfaces, which an eye 0.5 m off the centre
+sees torn; and every step of the ramp larger than the layer's ``tol`` starts a background layer at
+its own, intermediate depth (holoflow/geometry/layers.py), which the far surface's layer cannot pass.
+
+``snap_depth_edges`` runs ``rounds`` times: around each pixel it takes the nearest (lo) and farthest
+(hi) depth of the (2 ``radius`` + 1)^2 window (columns wrap, rows clamp); where hi > lo (1 +
+``ratio``) the window holds an edge, and a pixel of it that lies more than ``tol`` (relative) from
+both ends is moved to the end nearer in inverse depth (parallax: what an eye move sees). Pixels
+within ``tol`` of an end, and everything away from edges, keep their depth, so a smooth surface
+(whose window spans less than ``ratio``) is never touched; a wall seen edge on enough to span
+``ratio`` across 2 ``radius`` + 1 pixels is stepped.
+
+Conventions: radial depth in metres, finite > 0 (the sky already on its shell; holoflow/geometry/pointcloud.py).
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+
+def _window_min_max(d: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Min and max [H, W] of d [H, W] over (2 radius + 1)^2 windows, columns wrapping, rows clamped."""
+    x = torch.cat([d[:, -radius:], d, d[:, :radius]], 1)[None, None]       # [1, 1, H, W + 2r]
+    x = F.pad(x, (0, 0, radius, radius), mode="replicate")                 # [1, 1, H + 2r, W + 2r]
+    k = 2 * radius + 1
+    return -F.max_pool2d(-x, k, 1)[0, 0], F.max_pool2d(x, k, 1)[0, 0]
+
+
+def snap_depth_edges(radial_depth: torch.Tensor, radius: int = 2, ratio: float = 0.25, tol: float = 0.1,
+                     rounds: int = 2) -> torch.Tensor:
+    """The ramps of radial_depth [H, W] (metres, finite > 0) moved onto their near or far side (module
+    docstring): [H, W], same dtype. radius (px): half window; ratio: far / near - 1 that makes a
+    window an edge; tol: relative distance from an end within which a pixel stays; rounds: passes
+    (0 or radius 0: unchanged)."""
+    d = radial_depth
+    if radius < 1:
+        return d
+    for _ in range(rounds):
+        lo, hi = _window_min_max(d, radius)
+        mid = (hi > lo * (1 + ratio)) & (d > lo * (1 + tol)) & (hi > d * (1 + tol))
+        to_near = (1 / lo - 1 / d) < (1 / d - 1 / hi)
+        d = torch.where(mid, torch.where(to_near, lo, hi), d)
+    return d
