@@ -31,7 +31,7 @@ class PointCloudParams(StageParams):
                                   "(paper 0.4)", ge=0)
     sky_radius: float = param(0.0, "far shell radius for unbounded pixels (0 = 2x the 99th percentile depth)",
                               "m", ge=0)
-    edge_radius: int = param(2, "P_f: occlusion edges drawn as ramps by the depth are made steps, each ramp "
+    edge_radius: int = param(3, "P_f: occlusion edges drawn as ramps by the depth are made steps, each ramp "
                              "pixel moved onto the near or far side within a window this many px around it "
                              "(holoflow/geometry/edges.py), before the gradient filter and the layer; 0 = off",
                              "px", ge=0)

@@ -11,8 +11,9 @@ its own, intermediate depth (holoflow/geometry/layers.py), which the far surface
 ``ratio``) the window holds an edge, and a pixel of it that lies more than ``tol`` (relative) from
 both ends is moved to the end nearer in inverse depth (parallax: what an eye move sees). Pixels
 within ``tol`` of an end, and everything away from edges, keep their depth, so a smooth surface
-(whose window spans less than ``ratio``) is never touched; a wall seen edge on enough to span
-``ratio`` across 2 ``radius`` + 1 pixels is stepped.
+(whose window spans less than ``ratio``) is never touched. A surface at incidence a spans about
+2 ``radius`` tan(a) x the pixel angle: with radius 3 and ratio 0.25 on a 1536 px wide P_f, only one
+seen beyond 84 deg (2048 px: 85.6 deg) is stepped.
 
 Conventions: radial depth in metres, finite > 0 (the sky already on its shell; holoflow/geometry/pointcloud.py).
 """
@@ -30,7 +31,7 @@ def _window_min_max(d: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.T
     return -F.max_pool2d(-x, k, 1)[0, 0], F.max_pool2d(x, k, 1)[0, 0]
 
 
-def snap_depth_edges(radial_depth: torch.Tensor, radius: int = 2, ratio: float = 0.25, tol: float = 0.1,
+def snap_depth_edges(radial_depth: torch.Tensor, radius: int = 3, ratio: float = 0.25, tol: float = 0.1,
                      rounds: int = 2) -> torch.Tensor:
     """The ramps of radial_depth [H, W] (metres, finite > 0) moved onto their near or far side (module
     docstring): [H, W], same dtype. radius (px): half window; ratio: far / near - 1 that makes a

@@ -33,13 +33,15 @@ def test_a_ramp_becomes_a_step_and_its_layer_lies_on_the_far_side():
 
 
 def test_smooth_surfaces_are_left_alone():
-    # a wall seen obliquely (inverse depth affine in the column) and a floor-like vertical gradient
+    # walls seen obliquely all round (inverse depth smooth in the column, the seam included) and a
+    # floor seen at 80 deg incidence (relative gradient tan 80 deg x the pixel angle)
     H, W = 32, 128
     cols = torch.arange(W, dtype=torch.float64)
-    d = (1.0 / (0.8 - 0.004 * cols)).expand(H, W).clone()                    # 1.25 .. 3.6 m, 1-2 % a pixel
+    d = (1.0 / (0.5 + 0.15 * torch.sin(2 * math.pi * cols / W))).expand(H, W).clone()   # 1.5 .. 2.9 m, <= 2.3 % a pixel
     assert torch.equal(snap_depth_edges(d), d)
     rows = torch.arange(H, dtype=torch.float64)[:, None]
-    d2 = (1.0 + 0.05 * rows).expand(H, W).clone()
+    g = math.tan(math.radians(80)) * 2 * math.pi / 1536       # a surface at 80 deg incidence in a 1536 px P_f
+    d2 = torch.exp(g * rows).expand(H, W).clone()
     assert torch.equal(snap_depth_edges(d2), d2)
     assert torch.equal(snap_depth_edges(d, radius=0), d)
 
