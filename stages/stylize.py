@@ -6,7 +6,8 @@ XDoG lineart, then the OpenCV style named by the prompt's style words (holoflow.
 ``style`` param: auto | none | a style name); no style word -> passthrough. ``controlnet_lineart``:
 SD 1.5 + ControlNet Lineart conditioned on the lineart of the base panorama
 (holoflow.networks.controlnet_lineart). A user's photo (``--use base_pano=PHOTO``) with no style asked
-for passes through unchanged with any engine, at its own size (holoflow/imageops/photo.py).
+for passes through unchanged with any engine, at its own size up to ``max_width`` (a wider one is
+resized to that here, once; holoflow/imageops/photo.py).
 """
 from __future__ import annotations
 
@@ -25,8 +26,12 @@ def main() -> int:
     base, src = read_rgb(path), read_exr(path)[1]                                      # [H, W, 3] linear
     if unaltered(src) and requested_style(job.prompt, cfg.style) is None:            # the photo stays the photo
         from holoflow.imageops.lineart import lineart
+        from holoflow.imageops.photo import keep_size
+        from holoflow.imageops.resize import lanczos_resize
 
-        out, lines, attrs, meta = base, lineart(base), {"holoflow.style": "none"}, {"style": "none (user's photo)"}
+        h, w = keep_size(base.shape, cfg.width, cfg.height, cfg.max_width)
+        out = base if w >= base.shape[1] else lanczos_resize(base, w, h)             # wider than the cap: to it
+        lines, attrs, meta = lineart(out), {"holoflow.style": "none"}, {"style": "none (user's photo)"}
     else:
         out, lines, attrs, meta = StylizeParams.ENGINES.get(job.engine)(base, job.prompt, cfg, job.seed,
                                                                        job.device, job.progress)

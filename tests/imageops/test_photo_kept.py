@@ -43,7 +43,7 @@ def test_a_photo_without_a_style_reaches_detail_unchanged(tmp_path):
     photo, _ = read_panorama_image(tmp_path / "photo.png")
     assert pano.shape == photo.shape == (128, 256, 3)
     np.testing.assert_array_equal(pano, photo.astype(np.float32))     # passed through: no arithmetic at all
-    assert attrs["holoflow.unaltered"] == 1 and attrs["holoflow.max_width"] == 4096
+    assert attrs["holoflow.unaltered"] == 1 and attrs["holoflow.max_width"] == 2048
     assert attrs["holoflow.source"].endswith("photo.png")
 
 
@@ -53,6 +53,18 @@ def test_a_style_word_still_styles_the_photo_at_its_own_size(tmp_path):
     assert pano.shape == photo.shape
     assert np.abs(pano - photo).mean() > 0.01
     assert attrs["holoflow.unaltered"] == 0
+
+
+def test_a_photo_wider_than_the_cap_is_resized_once_at_stylize(tmp_path):
+    """Wider than ``max_width``: stylize brings it to the cap (and draws its lineart there), so upscale
+    and detail never carry the photo's full size; the record keeps the cap."""
+    cap = [f"--set={s}.max_width=192" for s in ("stylize", "upscale", "detail")]
+    pano, attrs = _detail(tmp_path, "a room", *cap)
+    run = max((tmp_path / "store" / "runs").iterdir())
+    assert read_rgb(run / "stylize" / "pano.exr").shape == pano.shape == (96, 192, 3)
+    assert read_exr(run / "stylize" / "lineart.exr")[0]["Y"].shape == (96, 192)
+    assert read_rgb(run / "upscale" / "pano.exr").shape == (96, 192, 3)
+    assert attrs["holoflow.max_width"] == 192 and attrs["holoflow.unaltered"] == 0
 
 
 @pytest.mark.parametrize("shape, size, cap, want", [
