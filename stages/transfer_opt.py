@@ -30,11 +30,13 @@ def main() -> int:
     if cfg.fit_iters > 0:
         import torch
 
+        job.torch_threads(job.cpus)   # the fit's views and residuals are large tensors
         pano = torch.from_numpy(read_rgb(job.input_file("detail", "pano.exr"))).permute(2, 0, 1)   # [3, H, W]
         t0 = time.perf_counter()
         log["colour_fit"] = fit_colours(model, viewing_views(pano, cams, cfg.fit_size), cfg.fit_iters,
                                         job.engine, cfg.fit_relax, progress=job.progress)
         log["seconds"]["colour_fit"] = round(time.perf_counter() - t0, 3)
+        job.torch_threads(1)
     save_result(job, model, log, pano_views, "scene.ply")         # G1, its fit and train_log.json
     write_previews(model, job.output_dir / "previews", pano_views[0]["K"], job.engine, size=cfg.preview_size)
     return 0
