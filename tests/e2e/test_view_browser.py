@@ -61,6 +61,12 @@ def _pano_centre_colour(run: Path) -> np.ndarray:
     return pano[H // 2 - d:H // 2 + d, W // 2 - d:W // 2 + d].reshape(-1, 3).mean(0)
 
 
+def _centre(shot: np.ndarray) -> np.ndarray:
+    """The screenshot's [HEIGHT, WIDTH, 3] pixels within PATCH_DEG of the view centre: [n, 3]."""
+    half = round(np.tan(np.radians(PATCH_DEG)) / np.tan(np.radians(FOV_DEG / 2)) * HEIGHT / 2)
+    return shot[HEIGHT // 2 - half:HEIGHT // 2 + half, WIDTH // 2 - half:WIDTH // 2 + half].reshape(-1, 3)
+
+
 def test_viewer_draws_the_scene_and_stops_cleanly(two_runs, tmp_path):
     _need_chromium()
     import imageio.v3 as iio
@@ -74,8 +80,16 @@ def test_viewer_draws_the_scene_and_stops_cleanly(two_runs, tmp_path):
     try:
         url = _wait_for_url(proc, log)
         assert url.startswith("http://127.0.0.1:")
-        png = chromium.screenshot(url, tmp_path / "view.png", WIDTH, HEIGHT, timeout=120, webgl=True,
-                                  budget_ms=15000)
+        expected = _pano_centre_colour(run)
+        # software WebGL on a busy 2-core machine sometimes has not drawn the whole scene within the
+        # first budget (seen: centre 153-178 against 125, the white page showing through): one
+        # second look with a longer budget; the test fails when both miss the panorama's colour
+        for budget in (15000, 45000):
+            png = chromium.screenshot(url, tmp_path / f"view-{budget}.png", WIDTH, HEIGHT, timeout=180,
+                                      webgl=True, budget_ms=budget)
+            centre = _centre(iio.imread(png)[..., :3].astype(np.float64))
+            if np.abs(centre.mean(0) - expected).max() < 25:
+                break
         children = _children(proc.pid)
     finally:
         proc.send_signal(signal.SIGINT)
@@ -86,9 +100,5 @@ def test_viewer_draws_the_scene_and_stops_cleanly(two_runs, tmp_path):
 
     assert port_free("127.0.0.1", int(url.rsplit(":", 1)[1]))
 
-    shot = iio.imread(png)[..., :3].astype(np.float64)                          # [HEIGHT, WIDTH, 3]
-    half = round(np.tan(np.radians(PATCH_DEG)) / np.tan(np.radians(FOV_DEG / 2)) * HEIGHT / 2)
-    centre = shot[HEIGHT // 2 - half:HEIGHT // 2 + half, WIDTH // 2 - half:WIDTH // 2 + half].reshape(-1, 3)
-    expected = _pano_centre_colour(run)
     # the empty viewer is a near-white background, far from this scene's dim colours
     assert np.abs(centre.mean(0) - expected).max() < 25, (centre.mean(0), expected)
