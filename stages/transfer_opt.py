@@ -1,6 +1,7 @@
 """transfer_opt: Transfer Optimization. Fresh Gaussians from P_f, trained on the PANO and INP sets
 together, then (``fit_iters`` > 0) their colours fitted to the detail panorama's views at the base
-cameras at the viewing size ``fit_size`` (holoflow/recon/colour_fit.py); writes the final scene (scene.ply, 3DGS layout), train_log.json and sRGB previews rendered
+cameras at the viewing size ``fit_size`` (holoflow/recon/colour_fit.py); writes the final scene
+(scene.ply, 3DGS layout), train_log.json and sRGB previews rendered
 from inside the scene (previews/look_around.png strip, previews/look_around.gif)."""
 from __future__ import annotations
 

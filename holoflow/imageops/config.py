@@ -21,8 +21,8 @@ class StylizeParams(StageParams):
     width: int = param(1024, "output width (lineart and stylized panorama)", "px", ge=1)
     height: int = param(512, "output height", "px", ge=1)
     max_width: int = param(2048, "an input wider than width keeps its own size up to this (a user's photo is "
-                           "never shrunk below it; holoflow/imageops/photo.py): 2048 holds all the preview's 1536 px P_f and 384 px "
-                           "fit views resolve; quality 4096; 0 = no cap", "px", ge=0)
+                           "never shrunk below it; holoflow/imageops/photo.py): 2048 holds all the preview's 1536 px "
+                           "P_f and 384 px fit views resolve; quality 4096; 0 = no cap", "px", ge=0)
     style: str = param("auto", "auto = from the prompt's style words; none = passthrough; or a style name "
                        "(holoflow/imageops/styles.py). A user's photo with no style asked for passes "
                        "through with any engine")
@@ -46,8 +46,8 @@ class UpscaleParams(StageParams):
     width: int = param(2048, "output width", "px", ge=1)
     height: int = param(1024, "output height", "px", ge=1)
     max_width: int = param(2048, "an input wider than width keeps its own size up to this (a user's photo is "
-                           "never shrunk below it; holoflow/imageops/photo.py): 2048 holds all the preview's 1536 px P_f and 384 px "
-                           "fit views resolve; quality 4096; 0 = no cap", "px", ge=0)
+                           "never shrunk below it; holoflow/imageops/photo.py): 2048 holds all the preview's 1536 px "
+                           "P_f and 384 px fit views resolve; quality 4096; 0 = no cap", "px", ge=0)
     model: str = param("", "realesrgan: local weights")
     tile: int = param(256, "realesrgan: tile side", "px", ge=0)
 
@@ -66,8 +66,8 @@ class DetailParams(StageParams):
     width: int = param(2048, "output width", "px", ge=1)
     height: int = param(1024, "output height", "px", ge=1)
     max_width: int = param(2048, "an input wider than width keeps its own size up to this (a user's photo is "
-                           "never shrunk below it; holoflow/imageops/photo.py): 2048 holds all the preview's 1536 px P_f and 384 px "
-                           "fit views resolve; quality 4096; 0 = no cap", "px", ge=0)
+                           "never shrunk below it; holoflow/imageops/photo.py): 2048 holds all the preview's 1536 px "
+                           "P_f and 384 px fit views resolve; quality 4096; 0 = no cap", "px", ge=0)
     strength: float = param(0.5, "classical: detail boost (0 = plain resize); controlnet_tile: img2img strength",
                             ge=0)
     model: str = param("", "controlnet_tile: SD 1.5 base model")

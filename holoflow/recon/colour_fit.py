@@ -59,7 +59,8 @@ def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu",
     over ``views`` (one image size; image sRGB [H, W, 3], viewmat [4, 4], K [3, 3]). Returns the log:
     PSNR (dB, all pixels of all views) before each pass and the number of Gaussians the views see."""
     from holoflow.splat import rasterize
-    from holoflow.splat.project import SH_C0, eval_sh
+    from holoflow.splat.project import SH_C0
+    from holoflow.splat.rasterize import camera_colors
 
     if iterations <= 0 or not views:
         return {"iterations": 0}
@@ -70,14 +71,6 @@ def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu",
     view_dependent = model.sh_degree > 0
     psnr, seen = [], 0
 
-    def colours(vm: torch.Tensor) -> torch.Tensor:                  # [N, 3] sRGB towards camera vm
-        sh = model.sh.detach()
-        if not view_dependent:
-            return eval_sh(sh[:, :1], means, 0)
-        campos = -vm[:3, :3].T @ vm[:3, 3]
-        d = means - campos
-        return eval_sh(sh, d / d.norm(dim=-1, keepdim=True).clamp_min(1e-12), model.sh_degree)
-
     def one_pass() -> tuple[torch.Tensor, torch.Tensor, float]:
         num = torch.zeros(len(means), 3, device=dev, dtype=torch.float64)
         den = torch.zeros(len(means), device=dev, dtype=torch.float64)
@@ -87,7 +80,8 @@ def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu",
             part = views[s:s + step]
             vm = torch.stack([v["viewmat"] for v in part]).to(dev)
             K = torch.stack([v["K"] for v in part]).to(dev)
-            feats = torch.cat([colours(vm[0]), torch.ones(len(means), 1, device=dev)], 1).requires_grad_(True)
+            rgb = camera_colors(means, model.sh.detach(), vm[:1], model.sh_degree)[0]          # [N, 3]
+            feats = torch.cat([rgb, torch.ones(len(means), 1, device=dev)], 1).requires_grad_(True)
             out = rasterize(means, quats, scales, opac, feats, vm, K, w, h, backend=backend, depth=False)
             target = torch.stack([v["image"] for v in part]).to(dev)
             resid = (out["rgb"][..., :3] - target).detach()                 # [c, H, W, 3]

@@ -55,7 +55,7 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
     # looser one), the kept ones stay in index order, so the images are the same bytes.
     sel = drawn.any(0).nonzero()[:, 0] if backend == "cpu" else slice(None)            # [n]
     depths = proj["depths"]
-    rgb = _colors(means[sel], colors[sel], viewmats, sh_degree)                        # [C, n, D]
+    rgb = camera_colors(means[sel], colors[sel], viewmats, sh_degree)                      # [C, n, D]
     D = rgb.shape[-1]
     d_sel = depths[:, sel]
     extra = [d_sel[..., None]] if depth else []
@@ -78,8 +78,8 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
                 meta=dict(means2d=proj["means2d"], radii=radii, depths=depths, backend=backend))
 
 
-def _colors(means: torch.Tensor, colors: torch.Tensor, viewmats: torch.Tensor,
-            sh_degree: int | None) -> torch.Tensor:
+def camera_colors(means: torch.Tensor, colors: torch.Tensor, viewmats: torch.Tensor,
+                  sh_degree: int | None) -> torch.Tensor:
     """Per-camera colours [C, N, D] of Gaussians at means [N, 3]: colors [N, D] as they are, or SH
     [N, K, 3] evaluated towards each camera centre (degree 0 needs no direction)."""
     C = viewmats.shape[0]
