@@ -16,11 +16,11 @@ def main() -> int:
     job = Job.from_argv()
     from holoflow.imageops.config import DetailParams
     from holoflow.imageops.photo import provenance, same_pixels, unaltered
-    from holoflow.io.exr import read_exr, read_rgb, write_rgb
+    from holoflow.io.exr import read_rgb_attrs, write_rgb
 
     cfg = job.config(DetailParams)
     path = job.input_file("pano", "pano.exr")
-    pano, src = read_rgb(path), read_exr(path)[1]                                      # [H, W, 3] linear
+    pano, src = read_rgb_attrs(path)                                       # [H, W, 3] linear, header
     if unaltered(src):                                                                 # nothing to restore
         out, meta = pano, {"passthrough": "user's photo, not styled or resized"}
     else:

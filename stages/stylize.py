@@ -19,11 +19,11 @@ def main() -> int:
     from holoflow.imageops.config import StylizeParams
     from holoflow.imageops.photo import provenance, same_pixels, unaltered
     from holoflow.imageops.styles import requested_style
-    from holoflow.io.exr import read_exr, read_rgb, write_exr, write_rgb
+    from holoflow.io.exr import read_rgb_attrs, write_exr, write_rgb
 
     cfg = job.config(StylizeParams)
     path = job.input_file("pano", "pano.exr")
-    base, src = read_rgb(path), read_exr(path)[1]                                      # [H, W, 3] linear
+    base, src = read_rgb_attrs(path)                                       # [H, W, 3] linear, header
     if unaltered(src) and requested_style(job.prompt, cfg.style) is None:            # the photo stays the photo
         from holoflow.imageops.lineart import lineart
         from holoflow.imageops.photo import keep_size

@@ -14,11 +14,11 @@ def main() -> int:
     job = Job.from_argv()
     from holoflow.imageops.config import UpscaleParams
     from holoflow.imageops.photo import provenance, same_pixels
-    from holoflow.io.exr import read_exr, read_rgb, write_rgb
+    from holoflow.io.exr import read_rgb_attrs, write_rgb
 
     cfg = job.config(UpscaleParams)
     path = job.input_file("pano", "pano.exr")
-    pano, src = read_rgb(path), read_exr(path)[1]                                      # [H, W, 3] linear
+    pano, src = read_rgb_attrs(path)                                       # [H, W, 3] linear, header
     out, meta = UpscaleParams.ENGINES.get(job.engine)(pano, job.prompt, cfg, job.seed, job.device, job.progress)
     job.meta(engine=job.engine, max_width=cfg.max_width, **meta)
     write_rgb(job.output("pano.exr"), out, {"holoflow.stage": "upscale", "holoflow.engine": job.engine,

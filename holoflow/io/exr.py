@@ -77,11 +77,16 @@ def write_rgb(path: str | Path, rgb: np.ndarray, attrs: dict[str, Any] | None = 
 
 def read_rgb(path: str | Path) -> np.ndarray:
     """Read R, G, B of an EXR as float32 [H, W, 3]."""
-    channels, _ = read_exr(path)
+    return read_rgb_attrs(path)[0]
+
+
+def read_rgb_attrs(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
+    """R, G, B of an EXR as float32 [H, W, 3] and its non-standard header attributes, in one read."""
+    channels, attrs = read_exr(path)
     missing = [c for c in "RGB" if c not in channels]
     if missing:
         raise ExrError(f"{path}: no {','.join(missing)} channel(s); has {sorted(channels)}")
-    return np.stack([channels["R"], channels["G"], channels["B"]], axis=-1)
+    return np.stack([channels["R"], channels["G"], channels["B"]], axis=-1), attrs
 
 
 def _encode_attr(value: Any) -> Any:

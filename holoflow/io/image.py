@@ -43,7 +43,8 @@ def read_panorama_image(path: str | Path) -> tuple[np.ndarray, dict]:
     try:
         spec = inp.spec()
         fmt = str(spec.format)
-        pixels = inp.read_image(0, 0, 0, min(spec.nchannels, 4), "float")
+        codes = fmt in ("uint8", "uint16")          # read as stored: linearised through a table below
+        pixels = inp.read_image(0, 0, 0, min(spec.nchannels, 4), fmt if codes else "float")
         damage = inp.geterror().strip() if inp.has_error else ""
     finally:
         inp.close()
@@ -52,14 +53,21 @@ def read_panorama_image(path: str | Path) -> tuple[np.ndarray, dict]:
                                "fix: copy or export the file again")
     if pixels is None or spec.width < 1 or spec.height < 1:
         raise ImageImportError(f"{path.name}: no pixels could be read; fix: check the file")
-    img = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, -1)
+    img = np.asarray(pixels).reshape(spec.height, spec.width, -1)
     rgb = img[..., :3] if img.shape[2] >= 3 else np.repeat(img[..., :1], 3, axis=2)
     integer = fmt.startswith("uint") or fmt.startswith("int")
     colour = "linear (float file, kept)"
-    if integer:
+    if codes:         # one table entry per code: the same curve, 1 / 30 of the time on a 6656 px photo
         from holoflow.imageops.color import srgb_to_linear
 
-        rgb = srgb_to_linear(rgb)
+        top = np.iinfo(img.dtype).max
+        # code x (1 / top) in float32: OpenImageIO's own conversion, so the values are its float read's
+        rgb = srgb_to_linear(np.arange(top + 1, dtype=np.float32) * np.float32(1.0 / top))[rgb]
+        colour = f"sRGB {fmt} decoded to linear"
+    elif integer:
+        from holoflow.imageops.color import srgb_to_linear
+
+        rgb = srgb_to_linear(np.asarray(rgb, dtype=np.float32))
         colour = f"sRGB {fmt} decoded to linear"
     try:
         rgb, counts = repair_colour(rgb)

@@ -205,3 +205,27 @@ def test_a_stage_writing_nan_fails_at_that_stage_in_one_line(tmp_path):
         if nan:
             assert done.stderr.strip() == ("nan_stage: non-finite output, nothing committed: x.exr: channel Y has "
                                            "1 NaN, 0 +inf, 0 -inf of 8 values (docs/hard-inputs.md)")
+
+
+@pytest.mark.parametrize("fmt", ["uint8", "uint16"])
+def test_integer_codes_decode_as_the_float_read(tmp_path, fmt):
+    """8 / 16-bit files are linearised through a table of every code: what the curve gives on
+    OpenImageIO's own float read of the file (grey and RGBA layouts too). Equal on this machine; the
+    tolerance only allows numpy's float32 pow to differ by an ulp between its SIMD and scalar loops."""
+    import OpenImageIO as oiio
+
+    from holoflow.imageops.color import srgb_to_linear
+    from holoflow.io.image import read_panorama_image
+
+    top = np.iinfo(fmt).max
+    codes = np.random.default_rng(5).integers(0, top + 1, (H, W, 4)).astype(fmt)
+    for name, arr in (("rgb", codes[..., :3]), ("grey", codes[..., :1]), ("rgba", codes)):
+        src = _write_image(tmp_path / f"{name}.png", arr, fmt)
+        inp = oiio.ImageInput.open(str(src))
+        floats = np.asarray(inp.read_image(0, 0, 0, min(arr.shape[2], 4), "float"), np.float32)
+        inp.close()
+        want = srgb_to_linear(floats.reshape(H, W, -1))
+        want = want[..., :3] if want.shape[2] >= 3 else np.repeat(want[..., :1], 3, axis=2)
+        rgb, facts = read_panorama_image(src)
+        np.testing.assert_allclose(rgb, want, rtol=1e-6, atol=0)
+        assert rgb.dtype == np.float32 and facts["colour"] == f"sRGB {fmt} decoded to linear"
