@@ -13,6 +13,7 @@ Layout under the store root::
     corrupt/                  objects whose bytes no longer match their name are moved here
     cache/code.json           (path, size, mtime_ns) -> source digest, so code hashing is cheap
     cache/pipeline.json       the parsed pipeline.yaml, keyed by its (path, size, mtime_ns)
+    cache/imports.json        (a --use image's sha256, the decoder's code) -> its imported EXR + facts
     lock                      fcntl.flock held by `run` and `gc --yes`
 
 Crash safety: an object appears only through a hard link (else ``os.replace``) of a complete, fsynced

@@ -65,12 +65,20 @@ IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".hdr")  # holoflow.io.i
 
 def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     """A photo / image panorama for an EXR stage: decoded to linear RGB (holoflow.io.image), written as
-    the stage's primary EXR; the facts (file, digest, colour handling, GPano) go to the run record."""
+    the stage's primary EXR; the facts (file, digest, colour handling, GPano) go to the run record.
+    The same file through the same decoder code is decoded once per store (``import_cache``): a rerun
+    with a 6656 px photo costs its sha256, not a decode and a 265 MB EXR."""
     from holoflow.io.exr import write_rgb
     from holoflow.io.image import ImageImportError, read_panorama_image
 
     from holoflow.io.validate import InputRefused
+    from .store import sha256_file
 
+    sha, name = sha256_file(src), src.name
+    hit = import_cache(ctx, sha, facts=True)
+    if hit is not None and hit["facts"].get("file") == name:
+        ctx.imports[stage] = hit["facts"]
+        return hit["outputs"]
     try:
         rgb, facts = read_panorama_image(src)
     except (ImageImportError, InputRefused) as e:
@@ -81,7 +89,7 @@ def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     out = {ctx.pipe.stages[stage].primary: ctx.store.put(tmp)}
     tmp.parent.rmdir()
     ctx.imports[stage] = facts
-    import_cache(ctx, facts["sha256"], out)
+    import_cache(ctx, facts["sha256"], out, facts)
     return out
 
 
@@ -111,17 +119,33 @@ def _import_exr(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     return out
 
 
-def import_cache(ctx: Context, source_sha: str, outputs: dict | None = None) -> dict | None:
-    """Remember (or look up) the outputs an image file imported to, by the file's sha256, so that
-    ``status`` sees the same input digests as the run without decoding the image again."""
+def import_cache(ctx: Context, source_sha: str, outputs: dict | None = None, facts: dict | None = None
+                 ) -> dict | None:
+    """Remember (``outputs`` given) or look up the outputs an image file imported to, by the file's
+    sha256 and the decoder's code (holoflow/io/image.py and what it imports), so that ``status`` sees
+    the same input digests as the run and a rerun skips the decode. A lookup returns the outputs, or
+    with ``facts=True`` {"outputs", "facts"} (None when the facts were not recorded); None when absent
+    or when an output object has left the store (``holoflow gc``)."""
+    from .imports import HOLOFLOW_ROOT
+    from .store import canonical_json, sha256_bytes
+
     path = ctx.store.root / "cache" / "imports.json"
+    decoder_code = ctx.hasher.closure(Path(HOLOFLOW_ROOT) / "holoflow" / "io" / "image.py")  # no import
+    decoder = sha256_bytes(canonical_json(decoder_code).encode())[:16]
+    key = f"{source_sha}:{decoder}"
     try:
         table = json.loads(path.read_text())
     except (OSError, ValueError):
         table = {}
     if outputs is None:
-        return table.get(source_sha)
-    table[source_sha] = outputs
+        entry = table.get(key)
+        if not isinstance(entry, dict) or not all(ctx.store.object_path(o["digest"]).is_file()
+                                                  for o in entry.get("outputs", {}).values()):
+            return None
+        if facts:
+            return entry if "facts" in entry else None
+        return entry["outputs"]
+    table[key] = {"outputs": outputs, **({"facts": facts} if facts is not None else {})}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(table, sort_keys=True))

@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from holoflow.io.exr import write_rgb
 
@@ -40,6 +41,39 @@ def test_use_rejects_non_exr_and_wrong_suffix(project, capsys):
     txt.write_text("x")
     rc, out, err = project.cli("run", "--pipeline", "images.yaml", "--use", f"img={txt}", capsys=capsys)
     assert rc == 2 and "main output is pano.exr" in err
+
+
+def test_use_photo_decoded_once_per_store(project, capsys, monkeypatch):
+    """A photo taken again (same bytes, same decoder code) reuses its imported EXR: no decode, the same
+    digest and import facts in the run record; once the object is gone from the store it decodes again."""
+    import OpenImageIO as oiio
+
+    import holoflow.io.image as image
+
+    monkeypatch.chdir(project.root)
+    photo = project.root / "room.png"
+    codes = np.random.default_rng(0).integers(0, 256, (8, 16, 3)).astype(np.uint8)
+    out = oiio.ImageOutput.create(str(photo))
+    assert out.open(str(photo), oiio.ImageSpec(16, 8, 3, "uint8"))
+    out.write_image(codes)
+    out.close()
+    use = ("--pipeline", "images.yaml", "--use", f"img={photo}", "--until", "img")   # the toy cloud wants Z
+    first = _images(project, capsys, *use)
+    pano = (project.store / "latest" / "img" / "pano.exr").resolve()
+
+    def refuse(path):
+        raise AssertionError("decoded a second time")
+
+    monkeypatch.setattr(image, "read_panorama_image", refuse)
+    again = _images(project, capsys, *use)
+    assert project.how(again) == {"img": "used"}
+    assert (project.store / "latest" / "img" / "pano.exr").resolve() == pano
+    runs = [json.loads((project.store / "runs" / s["run"] / "run.json").read_text()) for s in (first, again)]
+    assert runs[1]["stages"]["img"]["import"] == runs[0]["stages"]["img"]["import"]
+    assert runs[1]["stages"]["img"]["import"]["file"] == "room.png"
+    pano.unlink()                                                  # the object left the store
+    with pytest.raises(AssertionError, match="decoded a second time"):
+        project.cli("run", *use, capsys=capsys)
 
 
 def test_status_after_a_use_run_says_which_file_that_run_took(project, capsys, tmp_path):
