@@ -17,7 +17,7 @@ from typing import Any
 
 from .cachekey import cache_key
 from .context import BatchItem, Context, Options
-from .executors import StepTask
+from .executors import StepTask, ahead
 from .executors.failure import store_problem
 from .pipeline import PipelineError, check_files
 from .records import SceneRun, finish_batch, finish_run, made_with, write_run
@@ -243,8 +243,10 @@ class _Scheduler:
     def submit(self, job: _Job) -> None:
         if not self.expected and self.executor.kind == "local":
             self.expected = True
+            to_come = [(st, n) for st in self.states for n in st.pending if n not in st.ctx.uses]
             self.executor.expect([(st.ctx.resolved[n].resources.as_dict(), sorted(st.ctx.hasher.external(
-                st.ctx.pipe.program(n)))) for st in self.states for n in st.pending if n not in st.ctx.uses])
+                st.ctx.pipe.program(n)))) for st, n in to_come],
+                ahead.modules_for([list(st.ctx.hasher.closure(st.ctx.pipe.program(n))) for st, n in to_come]))
         for st, name in job.waiters:              # "ran in" counts from the start, not the queue
             st.t0[name] = time.monotonic()
         self.display.start_step(job.task.label, self.done + 1, self.total,

@@ -187,3 +187,10 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c,
         for f in range(nf_new):
             front[f] = cand[f]
         nf = nf_new
+
+
+def compile_ahead() -> None:
+    """Compile ``_grow`` (or load it from numba's disk cache): ``background_layer`` passes float64
+    arrays whatever its inputs' dtype. holoflow/flow/executors/ahead.py."""
+    d = torch.tensor([[1.0, 1.0, 2.0, 2.0], [1.0, 1.0, 2.0, 2.0]])        # [2, 4] a near and a far half
+    background_layer(torch.zeros(2, 4, 3), d, torch.ones(2, 4, dtype=torch.bool), 0.5)

@@ -29,3 +29,10 @@ def zbuffer_numpy(ix: np.ndarray, iy: np.ndarray, z: np.ndarray, ids: np.ndarray
     owner = np.full(height * width, n, np.int64)
     zbuffer(ix, iy, z, ids, radii, width, height, depth, owner)
     return depth, owner
+
+
+def compile_ahead() -> None:
+    """Compile ``zbuffer`` (or load it from numba's disk cache) for what the point stages pass: int64
+    pixels and float64 depths (their clouds are float64). holoflow/flow/executors/ahead.py."""
+    one = np.zeros(1, np.int64)
+    zbuffer_numpy(one, one, np.ones(1), one, one + 1, 2, 2, 1)

@@ -180,3 +180,9 @@ def lama_engine(images: np.ndarray, masks: np.ndarray, depths: np.ndarray | None
     linear = srgb_to_linear_torch(torch.from_numpy(images)).numpy()
     filled = lama.inpaint(linear, masks.astype(np.float32), cfg.model, device, progress)
     return linear_to_srgb_torch(torch.from_numpy(np.asarray(filled, np.float32))).numpy()
+
+
+def compile_ahead() -> None:
+    """Compile ``_walk`` (or load it from numba's disk cache): ``first_observed`` passes a bool mask
+    and int64 indices whatever its inputs. holoflow/flow/executors/ahead.py."""
+    first_observed(np.ones((2, 2), bool), DIRECTIONS[0], 1)

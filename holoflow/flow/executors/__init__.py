@@ -12,7 +12,7 @@ memory_gb}``); it never changes what a step computes. Every step still runs as i
 
 Interface (both): ``fits(resources)``, ``submit(task) -> handle``, ``wait(timeout) -> [(handle,
 result)]``, ``abort()``, ``close()``, plus ``kind``, ``default_retries`` and ``describe()``; the local
-one also ``expect(needs)`` (warm templates for the steps to come).
+one also ``expect(needs, ahead)`` (warm templates and compiled numba kernels for the steps to come).
 """
 from __future__ import annotations
 

@@ -14,6 +14,8 @@ import queue
 import threading
 from typing import Any
 
+from ..imports import HOLOFLOW_ROOT
+from . import ahead as ahead_mod
 from .task import StepTask, gpu_ids, host_memory_gb, step_env
 from .step import run_step
 
@@ -37,6 +39,7 @@ class LocalExecutor:
         self._next = 0
         self._aborted = False
         self.launcher = None
+        self.ahead = None                   # the compile-ahead process, once started
         if warm:
             from . import warm as warm_mod
 
@@ -46,9 +49,12 @@ class LocalExecutor:
         gpus = f", {len(self.gpus)} GPU" if self.gpus else ""
         return f"local, -j {self.jobs}{gpus}, {'warm' if self.launcher else 'cold'}"
 
-    def expect(self, needs: list[tuple[dict[str, Any], list[str]]]) -> None:
+    def expect(self, needs: list[tuple[dict[str, Any], list[str]]], ahead: list[str] = ()) -> None:
         """Steps still to come, as (resources, external imports): start their warm templates now, so
-        their imports overlap the steps before them. Call it from the run's scheduling thread."""
+        their imports overlap the steps before them, and the compiling of the numba kernels of
+        ``ahead`` (holoflow/flow/executors/ahead.py). Call it from the run's scheduling thread."""
+        if self.ahead is None:
+            self.ahead = ahead_mod.start(list(ahead), HOLOFLOW_ROOT)
         if self.launcher is None:
             return
         by_threads: dict[tuple, tuple[dict[str, str], set[str]]] = {}
@@ -147,3 +153,6 @@ class LocalExecutor:
             self.abort()
         if self.launcher is not None:
             self.launcher.close()
+        if self.ahead is not None:          # what it compiled is in numba's cache; the rest waits
+            self.ahead.kill()
+            self.ahead.wait()
