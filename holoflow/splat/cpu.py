@@ -39,14 +39,16 @@ PRANGE_ONLY = dict(prange=True, comprehension=False, reduction=False, inplace_bi
                    numpy=False, stencil=False, fusion=False)
 
 
-@njit(parallel=PRANGE_ONLY, cache=True)
+@njit(cache=True)
 def _boxes(visible, means2d, extent, opac, width, height, box):
     """Pixel box [N, 4] (x0, x1, y0, y1, inclusive, clipped to the image) of each Gaussian's 1/255
     reach; returns on-screen [N] bool (visible, finite, opacity >= 1/255 and the box meets the image).
-    means2d, extent [N, 2] px; pixel (col, row) is sampled at (col + 0.5, row + 0.5)."""
+    means2d, extent [N, 2] px; pixel (col, row) is sampled at (col + 0.5, row + 0.5).
+    Serial: on 2 cores a parallel twin saved 0.1 ms a 128 px view of G0 (~45k Gaussians drawn), and
+    cost 0.6-0.8 s of compiling on a fresh install."""
     N = means2d.shape[0]
     keep = np.zeros(N, np.bool_)
-    for g in prange(N):
+    for g in range(N):
         mx, my, ex, ey = means2d[g, 0], means2d[g, 1], extent[g, 0], extent[g, 1]
         box[g, 0], box[g, 1], box[g, 2], box[g, 3] = 0, -1, 0, -1
         if not (visible[g] and opac[g] >= ALPHA_MIN and math.isfinite(mx) and math.isfinite(my)
@@ -328,14 +330,13 @@ def serial_twin(dispatcher):
     return njit(cache=True)(g)
 
 
-_boxes_serial = serial_twin(_boxes)
 _bin_tiles_serial = serial_twin(_bin_tiles)
 _forward_serial = serial_twin(_forward)
 _backward_serial = serial_twin(_backward)
 _gather_grads_serial = serial_twin(_gather_grads)
 PARALLEL_MIN_ENTRIES = 2000    # tile entries below which the serial kernels run (measured, 2 idle cores: a
 #                                 128 px view of 16k entries composites in 11.4 ms parallel, 21.7 ms serial)
-PARALLEL_MIN_GAUSSIANS = 50000  # Gaussians below which the serial culling runs
+PARALLEL_MIN_GAUSSIANS = 50000  # on-screen Gaussians below which the serial binning runs
 
 
 def depth_order(depths: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -354,8 +355,7 @@ def bin_camera(means2d, conics, opac, feats, depths, visible, extent, width, hei
     pack = (rec, pbox, ft, offsets, ids, pstart, ent) as ``_bin_tiles``."""
     N = means2d.shape[0]
     box = np.empty((N, 4), np.int64)
-    keep = (_boxes if N >= PARALLEL_MIN_GAUSSIANS else _boxes_serial)(visible, means2d, extent, opac,
-                                                                    width, height, box)
+    keep = _boxes(visible, means2d, extent, opac, width, height, box)
     order = depth_order(depths, keep)
     if len(order) >= PARALLEL_MIN_GAUSSIANS:
         return order, _bin_tiles(order, box, means2d, conics, opac, feats, width, height,

@@ -150,10 +150,10 @@ def _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, wid
 def compile_ahead() -> None:
     """Compile the fast CPU path's numba kernels (or load them from numba's disk cache) as a float32
     model's training uses them, through this module's own glue so the dtypes are the stages': a
-    forward and backward pass of a small scene (serial culling and binning, parallel projection and
-    compositing) and of one above ``cpu.PARALLEL_MIN_GAUSSIANS`` on screen (parallel culling and
-    binning), 64 x 64 px each. The serial compositing kernels (views under ``PARALLEL_MIN_ENTRIES``
-    tile entries) are left to their first use. holoflow/flow/executors/ahead.py."""
+    forward and backward pass of a small scene (serial binning, parallel projection and compositing)
+    and of one above ``cpu.PARALLEL_MIN_GAUSSIANS`` on screen (parallel binning), 64 x 64 px each.
+    The serial compositing and projection kernels (views under ``PARALLEL_MIN_ENTRIES`` tile entries,
+    scenes under ``PARALLEL_MIN_WORK``) are left to their first use. holoflow/flow/executors/ahead.py."""
     from holoflow.splat.cpu import PARALLEL_MIN_GAUSSIANS
     from holoflow.splat.cpu_project import PARALLEL_MIN_WORK
     from holoflow.splat.synthetic import intrinsics, surface_scene
