@@ -77,6 +77,12 @@ class CodeHasher:
             out[self._relative(f, root)] = self.digest(f)
         return out
 
+    def files(self, program: Path) -> dict[str, str]:
+        """{file: search root} of every project file ``program`` imports (absolute paths; empty for a
+        non-Python program)."""
+        prog = str(program)
+        return self._graph(prog).closure(prog) if prog.endswith(".py") else {}
+
     def external(self, program: Path) -> set[str]:
         """Modules outside the project that ``program``'s closure imports (empty for a non-Python one)."""
         prog = str(program)

@@ -246,7 +246,7 @@ class _Scheduler:
             to_come = [(st, n) for st in self.states for n in st.pending if n not in st.ctx.uses]
             self.executor.expect([(st.ctx.resolved[n].resources.as_dict(), sorted(st.ctx.hasher.external(
                 st.ctx.pipe.program(n)))) for st, n in to_come],
-                ahead.modules_for([list(st.ctx.hasher.closure(st.ctx.pipe.program(n))) for st, n in to_come]))
+                ahead.modules_for([st.ctx.hasher.files(st.ctx.pipe.program(n)) for st, n in to_come]))
         for st, name in job.waiters:              # "ran in" counts from the start, not the queue
             st.t0[name] = time.monotonic()
         self.display.start_step(job.task.label, self.done + 1, self.total,

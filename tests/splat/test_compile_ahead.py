@@ -1,36 +1,37 @@
 """Compile ahead (holoflow/flow/executors/ahead.py): the kernels a run compiles before its steps need them
-are the ones, and the only specializations, that the stages' calls then use."""
+are the ones, and the only specializations, that the stages' calls then use; every kernel file takes part."""
 import json
 import re
 import subprocess
 import sys
 from pathlib import Path
 
-from holoflow.flow.executors.ahead import KERNELS, modules_for
+from holoflow.flow.cachekey import CodeHasher
+from holoflow.flow.executors.ahead import HOOK, modules_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
-# In a fresh interpreter (other tests compile other dtypes in this one): every KERNELS module's
-# compile_ahead, the signatures each kernel then has, then the calls the stages make at the
+# In a fresh interpreter (other tests compile other dtypes in this one): every compile_ahead, the signatures each kernel then has, then the calls the stages make at the
 # preview's sizes (a float32 GaussianModel of more than PARALLEL_MIN_WORK Gaussians, as P_f's 10^5
 # are, rendered and differentiated with and without depth, below and above PARALLEL_MIN_GAUSSIANS;
 # a float32 background layer; a float64 cloud through the z-buffer), and the signatures after.
 PROBE = r"""
 import importlib, json, sys
 import numba, torch
-from holoflow.flow.executors.ahead import KERNELS
+
+hooks, files = sys.argv[1].split(","), sys.argv[2].split(",")
 
 def kernels():
     out = {}
-    for f in sys.argv[1:]:
+    for f in files:
         mod = importlib.import_module(f[:-3].replace("/", "."))
         for name, d in vars(mod).items():
             if isinstance(d, numba.core.dispatcher.Dispatcher) and d.py_func.__module__ == mod.__name__:
                 out[mod.__name__ + "." + name] = [str(s) for s in d.signatures]
     return out
 
-for m in dict.fromkeys(KERNELS.values()):
-    importlib.import_module(m).compile_ahead()
+for f in hooks:
+    importlib.import_module(f[:-3].replace("/", ".")).compile_ahead()
 ahead = kernels()
 
 from holoflow.geometry.layers import background_layer
@@ -74,14 +75,20 @@ def kernel_files() -> list[str]:
                   if re.search(r"^@njit", p.read_text(), re.M))
 
 
+def hook_files() -> list[str]:
+    """The project's files that define ``compile_ahead``."""
+    return sorted(str(p.relative_to(ROOT)) for p in (ROOT / "holoflow").rglob("*.py") if HOOK.search(p.read_text()))
+
+
 def test_every_kernel_file_is_compiled_ahead():
-    # holoflow/splat/cpu_project.py: its kernels are compiled by rasterize's compile_ahead, with cpu.py's
-    assert set(kernel_files()) == {*KERNELS, "holoflow/splat/cpu_project.py"}
+    # the splatting kernels (cpu.py, cpu_project.py) are compiled by rasterize's compile_ahead, through its glue
+    assert set(kernel_files()) - set(hook_files()) == {"holoflow/splat/cpu.py", "holoflow/splat/cpu_project.py"}
+    assert set(hook_files()) - set(kernel_files()) == {"holoflow/splat/rasterize.py"}
 
 
 def test_compile_ahead_covers_the_stages_calls():
-    r = subprocess.run([sys.executable, "-c", PROBE, *kernel_files()], capture_output=True, text=True, cwd=ROOT,
-                       timeout=300)
+    r = subprocess.run([sys.executable, "-c", PROBE, ",".join(hook_files()), ",".join(kernel_files())],
+                       capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
     got = json.loads(r.stdout)
     ahead, after = got["ahead"], got["after"]
@@ -93,11 +100,11 @@ def test_compile_ahead_covers_the_stages_calls():
         assert after[k] == ahead[k], (k, after[k])           # the stages' calls compile nothing more
 
 
-def test_modules_in_the_order_steps_need_them():
-    closures = [["stages/tangent_depth.py"],
-                ["holoflow/splat/cpu.py", "holoflow/recon/inpaint.py", "holoflow/geometry/zbuffer_cpu.py"],
-                ["holoflow/geometry/layers.py", "holoflow/geometry/zbuffer_cpu.py"]]
-    assert modules_for(closures) == ["holoflow.geometry.zbuffer_cpu", "holoflow.splat.rasterize",
-                                     "holoflow.recon.inpaint", "holoflow.geometry.layers"]
-    assert modules_for([["stages/tangent_depth.py"]]) == []
-    assert all((ROOT / f).is_file() for f in KERNELS)
+def test_a_run_compiles_ahead_what_its_stages_import_in_their_order():
+    hasher = CodeHasher(ROOT, None)
+    closures = [hasher.files(ROOT / "stages" / f"{s}.py") for s in ("tangent_depth", "point_cloud", "pre_opt",
+                                                                    "transfer_opt")]
+    got = modules_for(closures)                  # point_cloud's first, then pre_opt's (each step's: any order)
+    assert set(got[:2]) == {f"{ROOT}:holoflow.geometry.{m}" for m in ("zbuffer_cpu", "layers")}
+    assert set(got[2:]) == {f"{ROOT}:holoflow.splat.rasterize", f"{ROOT}:holoflow.recon.inpaint"}
+    assert len(got) == 4 and modules_for(closures[:1]) == []

@@ -1,45 +1,52 @@
 """Compile ahead: a run compiles the numba kernels of its steps to come while the steps before them run.
 
 Every ``@njit(cache=True)`` kernel compiles on its first call after an install and keeps its machine
-code in numba's disk cache; on a fresh install the preview's first run spends ~13 s of pre_opt
+code in numba's disk cache; on a fresh install the preview's first run spent ~13 s of pre_opt
 compiling the splatting kernels, ~1.5 s of point_cloud and ~0.1 s of inp_set (2-core CPU). Numba
 looks in its disk cache whenever a kernel meets a new signature, so a process that compiles the
 kernels before the step that calls them hands them over through that cache.
 
-A local run whose steps to come import a file of :data:`KERNELS` starts one such process beside its
-first step (``python -m holoflow.flow.executors.ahead MODULE...``): it calls each module's
-``compile_ahead()`` (the kernels on tiny inputs of the dtypes the stages pass), in the order the
-steps need them. The preview's steps before pre_opt use one core each, so on a 2-core machine the
-compiling takes the idle one. A step that starts before its kernels are in the cache compiles the
-missing ones itself, as without this process. With a warm cache the process only loads the kernels.
-It runs at nice 19, on what the steps leave idle: on a busy machine (no idle core) it would only take
-the steps' time, for nothing when the cache is warm (~2.4 s of CPU then: imports, loading the kernels).
+A project module takes part by defining a top-level ``compile_ahead()`` that calls its kernels on
+tiny inputs of the dtypes the stages pass. A local run whose steps to come import such modules
+starts one process beside its first step (``python -m holoflow.flow.executors.ahead ROOT:MODULE...``)
+that calls them in the order the steps need them. The preview's steps before pre_opt use one core
+each, so on a 2-core machine the compiling takes the idle one. A step that starts before its kernels
+are in the cache compiles the missing ones itself, as without this process. With a warm cache the
+process only loads the kernels (~2.4 s of CPU: imports, loading). It runs at nice 19, on what the
+steps leave idle: on a busy machine it would only take the steps' time.
 """
 from __future__ import annotations
 
 import importlib
 import os
+import re
 import subprocess
 import sys
 
-#: project file whose importers call numba kernels -> module whose ``compile_ahead()`` compiles them
-KERNELS = {
-    "holoflow/geometry/zbuffer_cpu.py": "holoflow.geometry.zbuffer_cpu",
-    "holoflow/geometry/layers.py": "holoflow.geometry.layers",
-    "holoflow/splat/cpu.py": "holoflow.splat.rasterize",
-    "holoflow/recon/inpaint.py": "holoflow.recon.inpaint",
-}
+HOOK = re.compile(r"^def compile_ahead\(", re.M)
 
 
-def modules_for(closures: list[list[str]]) -> list[str]:
-    """The :data:`KERNELS` modules of the steps to come, each once, in the order of the first step
-    that imports it (``closures``: each step's project files, relative to the root, in run order)."""
+def modules_for(closures: list[dict[str, str]]) -> list[str]:
+    """``ROOT:MODULE`` of the project modules that define ``compile_ahead``, each once, in the order of
+    the first step that imports it (``closures``: each step's {file: search root}, in run order)."""
     out: list[str] = []
+    seen: set[str] = set()
     for files in closures:
-        for f, module in KERNELS.items():
-            if f in files and module not in out:
-                out.append(module)
+        for f, root in files.items():
+            if f in seen:
+                continue
+            seen.add(f)
+            if _has_hook(f):
+                out.append(f"{root}:{os.path.relpath(f, root)[:-3].replace(os.sep, '.').removesuffix('.__init__')}")
     return out
+
+
+def _has_hook(file: str) -> bool:
+    try:
+        with open(file, encoding="utf-8") as fh:
+            return HOOK.search(fh.read()) is not None
+    except (OSError, UnicodeDecodeError):
+        return False
 
 
 def start(modules: list[str], cwd: str) -> subprocess.Popen | None:
@@ -55,7 +62,10 @@ def start(modules: list[str], cwd: str) -> subprocess.Popen | None:
 
 def main(modules: list[str]) -> int:
     os.nice(19)
-    for name in modules:
+    for item in modules:
+        root, _, name = item.rpartition(":")
+        if root not in sys.path:
+            sys.path.append(root)
         importlib.import_module(name).compile_ahead()
     return 0
 
