@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from numba import njit, prange
 
-from holoflow.splat.cpu import PRANGE_ONLY, serial_twin
+from holoflow.splat.cpu import serial_twin
 from holoflow.splat.project import ALPHA_MIN, EPS2D
 
 
@@ -76,7 +76,7 @@ def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(parallel=PRANGE_ONLY, cache=True)
+@njit(parallel=True, cache=True)
 def _project_fwd(means, quats, scales, opac, view, Ks, width, height, near, far, min_opacity,
                  m2, con, cov, depth, valid, ext, drawn, radii):
     """Outputs per camera c and Gaussian n: m2 [C, N, 2], depth [C, N], valid [C, N] (near < z < far),
@@ -156,7 +156,7 @@ def _has_grad(drawn, g_m2, g_con, g_depth, n):
     return False
 
 
-@njit(parallel=PRANGE_ONLY, cache=True)
+@njit(parallel=True, cache=True)
 def _project_bwd(means, quats, scales, view, Ks, width, height, drawn, cov, g_m2, g_con, g_depth,
                  g_means, g_quats, g_scales):
     """Gradients through the cameras that draw each Gaussian (the others' outputs are not computed)."""
