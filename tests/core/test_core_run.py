@@ -164,7 +164,8 @@ def test_warm_templates_are_started_for_every_step_at_the_first_submit(project, 
 
     calls = []
     real = LocalExecutor.expect
-    monkeypatch.setattr(LocalExecutor, "expect", lambda self, needs: (calls.append(needs), real(self, needs))[1])
+    monkeypatch.setattr(LocalExecutor, "expect",
+                        lambda self, needs, ahead=(): (calls.append(needs), real(self, needs, ahead))[1])
     project.run_json("p", capsys=capsys)
     assert len(calls) == 1 and len(calls[0]) == 3               # gen, upper, join: all known at the start
 

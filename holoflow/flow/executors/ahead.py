@@ -20,7 +20,6 @@ from __future__ import annotations
 import importlib
 import os
 import re
-import subprocess
 import sys
 
 HOOK = re.compile(r"^def compile_ahead\(", re.M)
@@ -49,11 +48,13 @@ def _has_hook(file: str) -> bool:
         return False
 
 
-def start(modules: list[str], cwd: str) -> subprocess.Popen | None:
-    """The compiling process for ``modules`` (None when there are none); it dies with the thread that
-    starts it (the run's scheduling thread)."""
+def start(modules: list[str], cwd: str):
+    """The compiling process (``subprocess.Popen``) for ``modules``, None when there are none; it dies
+    with the thread that starts it (the run's scheduling thread)."""
     if not modules:
         return None
+    import subprocess
+
     from .step import popen
 
     return popen([sys.executable, "-m", __name__, *modules], cwd=cwd, stdin=subprocess.DEVNULL,
