@@ -11,9 +11,10 @@ from holoflow.flow.executors.ahead import HOOK, modules_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
-# In a fresh interpreter (other tests compile other dtypes in this one): every compile_ahead, the signatures each kernel then has, then the calls the stages make at the
-# preview's sizes (a float32 GaussianModel of more than PARALLEL_MIN_WORK Gaussians, as P_f's 10^5
-# are, rendered and differentiated with and without depth, below and above PARALLEL_MIN_GAUSSIANS;
+# In a fresh interpreter (other tests compile other dtypes in this one): every compile_ahead, the
+# signatures each kernel then has, then the calls the stages make at the preview's sizes (a float32
+# GaussianModel of more than PARALLEL_MIN_WORK Gaussians, as P_f's 10^5 are, rendered and
+# differentiated with and without depth, below and above PARALLEL_MIN_GAUSSIANS;
 # a float32 background layer; a float64 cloud through the z-buffer), and the signatures after.
 PROBE = r"""
 import importlib, json, sys
@@ -77,12 +78,14 @@ def kernel_files() -> list[str]:
 
 def hook_files() -> list[str]:
     """The project's files that define ``compile_ahead``."""
-    return sorted(str(p.relative_to(ROOT)) for p in (ROOT / "holoflow").rglob("*.py") if HOOK.search(p.read_text()))
+    return sorted(str(p.relative_to(ROOT)) for p in (ROOT / "holoflow").rglob("*.py")
+                  if HOOK.search(p.read_text()))
 
 
 def test_every_kernel_file_is_compiled_ahead():
-    # the splatting kernels (cpu.py, cpu_project.py) are compiled by rasterize's compile_ahead, through its glue
-    assert set(kernel_files()) - set(hook_files()) == {"holoflow/splat/cpu.py", "holoflow/splat/cpu_project.py"}
+    # the splatting kernels (cpu.py, cpu_project.py) are compiled by rasterize's compile_ahead
+    assert set(kernel_files()) - set(hook_files()) == {"holoflow/splat/cpu.py",
+                                                       "holoflow/splat/cpu_project.py"}
     assert set(hook_files()) - set(kernel_files()) == {"holoflow/splat/rasterize.py"}
 
 
