@@ -151,15 +151,16 @@ def compile_ahead() -> None:
     """Compile the fast CPU path's numba kernels (or load them from numba's disk cache) as a float32
     model's training uses them: the kernels the preview calls, one specialization each.
 
-    Back to front first (the parallel binning, the backward kernels, the forward ones, then the
-    serial binning, culling and projection), on empty inputs of the dtypes the glue passes: a step that starts while this runs compiles front to
-    back (projection, culling, binning, forward, backward) and meets this process half way instead
-    of compiling the same kernels beside it. Then through this module's own glue, which compiles
-    nothing more when those dtypes are the glue's: a forward and backward pass of a small scene
-    (serial binning, parallel projection and compositing) and of one above
-    ``cpu.PARALLEL_MIN_GAUSSIANS`` on screen (parallel binning), 64 x 64 px each. The serial
-    compositing and projection kernels (views under ``PARALLEL_MIN_ENTRIES`` tile entries, scenes
-    under ``PARALLEL_MIN_WORK``) are left to their first use. holoflow/flow/executors/ahead.py."""
+    Back to front first (the parallel binning and culling, the backward kernels, the forward ones,
+    then the serial binning and culling and the projection), on empty inputs of the dtypes the glue
+    passes: a step that starts while this runs compiles front to back (projection, culling,
+    binning, forward, backward) and meets this process half way instead of compiling the same
+    kernels beside it. Then through this module's own glue, which compiles nothing more when those
+    dtypes are the glue's: a forward and backward pass of a small scene (serial culling and
+    binning, parallel projection and compositing) and of one above ``cpu.PARALLEL_MIN_GAUSSIANS`` on
+    screen (parallel culling and binning), 64 x 64 px each. The serial compositing and projection
+    kernels (views under ``PARALLEL_MIN_ENTRIES`` tile entries, scenes under ``PARALLEL_MIN_WORK``)
+    are left to their first use. holoflow/flow/executors/ahead.py."""
     import numpy as np
 
     from holoflow.splat import cpu, cpu_project as cp
@@ -168,6 +169,7 @@ def compile_ahead() -> None:
     f4, f8, i8 = (lambda *shape, dt=dt: np.zeros(shape, dt) for dt in (np.float32, np.float64, np.int64))
     C, N, F, W, H = 1, 0, 4, 16, 16
     cpu._bin_tiles(i8(N), i8(N, 4), f8(N, 2), f4(N, 3), f4(N), f4(N, F), W, H, 1)
+    cpu._boxes(np.zeros(N, bool), f8(N, 2), f8(N, 2), f4(N), W, H, i8(N, 4))
     cp._project_bwd(f4(N, 3), f4(N, 4), f4(N, 3), f4(C, 4, 4), f4(C, 3, 3), W, H, np.zeros((C, N), bool),
                     f8(C, N, 3), f4(C, N, 2), f4(C, N, 3), f4(C, N), f4(N, 3), f4(N, 4), f4(N, 3))
     cpu._gather_grads(i8(1), i8(N), i8(N), f8(N, 6 + F), f4(N, 2), f4(N, 3), f4(N), f4(N, F))
@@ -175,11 +177,11 @@ def compile_ahead() -> None:
     cpu._backward(*pack, f8(H, W), i8(H, W), f8(H, W, F), f8(N, 6 + F))
     cpu._forward(*pack, f4(H, W, F), f8(H, W), i8(H, W), i8(1))
     cpu._bin_tiles_serial(i8(N), i8(N, 4), f8(N, 2), f4(N, 3), f4(N), f4(N, F), W, H, 1)
-    cpu._boxes(np.zeros(N, bool), f8(N, 2), f8(N, 2), f4(N), W, H, i8(N, 4))
+    cpu._boxes_serial(np.zeros(N, bool), f8(N, 2), f8(N, 2), f4(N), W, H, i8(N, 4))
     cp._project_fwd(f4(N, 3), f4(N, 4), f4(N, 3), f4(N), f4(C, 4, 4), f4(C, 3, 3), W, H, 0.01, 1e10, 0.004,
                     f4(C, N, 2), f4(C, N, 3), f8(C, N, 3), f4(C, N), np.zeros((C, N), bool), f8(C, N, 2),
                     np.zeros((C, N), bool), np.zeros((C, N), np.int32))
-    for n, depth in ((cp.PARALLEL_MIN_WORK, True), (2 * cpu.PARALLEL_MIN_GAUSSIANS, False)):  # one camera: work = n
+    for n, depth in ((cp.PARALLEL_MIN_WORK, True), (2 * cpu.PARALLEL_MIN_GAUSSIANS, False)):  # work = n
         s = surface_scene(n)
         params = [s[k].requires_grad_() for k in ("means", "quats", "scales", "opacities", "colors")]
         out = rasterize(*params, torch.eye(4)[None], intrinsics(64, 64)[None], 64, 64, backend="cpu",

@@ -61,7 +61,7 @@ json.dump({"ahead": ahead, "after": kernels()}, sys.stdout)
 # called from Python (the others are helpers compiled inside their callers); the serial twins run
 # for views and clouds below the parallel thresholds only, compile_ahead leaves them to first use
 ENTRY = ["holoflow.splat.cpu." + k for k in ("_boxes", "_bin_tiles", "_forward", "_backward", "_gather_grads",
-                                             "_bin_tiles_serial")] + \
+                                             "_boxes_serial", "_bin_tiles_serial")] + \
         ["holoflow.splat.cpu_project._project_fwd", "holoflow.splat.cpu_project._project_bwd",
          "holoflow.geometry.zbuffer_cpu.zbuffer", "holoflow.geometry.layers._grow",
          "holoflow.recon.inpaint._walk"]

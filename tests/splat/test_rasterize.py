@@ -101,7 +101,7 @@ def test_tile_binning_is_the_same_for_any_chunk_count(chunks):
     m2 = g.uniform(-10, 80, (N, 2))
     ext = g.uniform(0.5, 30, (N, 2))
     box = np.empty((N, 4), np.int64)
-    keep = cpu._boxes(np.ones(N, np.bool_), m2, ext, g.uniform(0.01, 1, N), W, H, box)
+    keep = cpu._boxes_serial(np.ones(N, np.bool_), m2, ext, g.uniform(0.01, 1, N), W, H, box)
     order = cpu.depth_order(g.uniform(1, 5, N).astype(np.float32), keep)
     args = (order, box, m2, g.normal(size=(N, 3)), g.uniform(0.01, 1, N), g.normal(size=(N, 4)), W, H)
     ref = cpu._bin_tiles_serial(*args, 1)

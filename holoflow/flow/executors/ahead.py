@@ -36,7 +36,8 @@ def modules_for(closures: list[dict[str, str]]) -> list[str]:
                 continue
             seen.add(f)
             if _has_hook(f):
-                out.append(f"{root}:{os.path.relpath(f, root)[:-3].replace(os.sep, '.').removesuffix('.__init__')}")
+                name = os.path.relpath(f, root)[:-3].replace(os.sep, ".").removesuffix(".__init__")
+                out.append(f"{root}:{name}")
     return out
 
 
