@@ -132,5 +132,7 @@ class Launcher:
 
     def close(self) -> None:
         for t in self._templates.values():
+            t.control.close()           # every template leaves at once, then each is reaped
+        for t in self._templates.values():
             t.close()
         self._templates.clear()
