@@ -11,6 +11,7 @@ from holoflow.geometry.camera import intrinsics_from_fov, look_at
 from holoflow.geometry.edges import snap_depth_edges
 from holoflow.geometry.layers import background_layer
 from holoflow.geometry.pointcloud import depth_gradient_mask, equirect_to_points
+from holoflow.recon.config import TransferOptParams
 
 from test_geom_layers import room_with_box     # the analytic box room (a sibling module, as tests/recon imports synth)
 
@@ -78,7 +79,7 @@ def test_box_with_ramped_depth_off_centre(ramp, eye_m, snap, slope, holes):
     H, W = 128, 256
     xyz, col = ramped_box_cloud(H, W, ramp, snap, slope)
     model = init_model(xyz.numpy(), (col.numpy() * 255 + 0.5).astype("uint8"), 0.99,
-                       footprint=(2 * math.pi / W, 0.7, 0.1))
+                       footprint=(2 * math.pi / W, TransferOptParams().footprint_width, 0.1))
     size = 96
     K = intrinsics_from_fov(47.43, size, size, dtype=torch.float32)
     eye = torch.tensor([[eye_m, 0.0, 0.0]])

@@ -9,6 +9,7 @@ from holoflow.geometry.camera import intrinsics_from_fov, look_at, pinhole_rays
 from holoflow.geometry.layers import background_layer
 from holoflow.geometry.pointcloud import depth_gradient_mask, equirect_to_points, footprint_radius, project_points_zbuffer
 from holoflow.geometry.sphere import equirect_directions
+from holoflow.recon.config import TransferOptParams
 
 RED, BLUE = torch.tensor([1.0, 0.0, 0.0]), torch.tensor([0.0, 0.0, 1.0])
 
@@ -150,7 +151,7 @@ def test_box_scene_after_a_tiny_optimisation(with_layer):
     H, W = 64, 128
     xyz, col = box_room_cloud(H, W, with_layer)
     model = init_model(xyz.numpy(), (col.numpy() * 255 + 0.5).astype("uint8"), 0.99,
-                       footprint=(2 * math.pi / W, 0.7, 0.1))          # transfer_opt's default init
+                       footprint=(2 * math.pi / W, TransferOptParams().footprint_width, 0.1))  # transfer_opt's init
     size = 32
     K = intrinsics_from_fov(90.0, size, size, dtype=torch.float32)
     V = base_rig(12, dtype=torch.float32)

