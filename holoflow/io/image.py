@@ -57,17 +57,15 @@ def read_panorama_image(path: str | Path) -> tuple[np.ndarray, dict]:
     rgb = img[..., :3] if img.shape[2] >= 3 else np.repeat(img[..., :1], 3, axis=2)
     integer = fmt.startswith("uint") or fmt.startswith("int")
     colour = "linear (float file, kept)"
-    if codes:         # one table entry per code: the same curve, 1 / 30 of the time on a 6656 px photo
+    if integer:
         from holoflow.imageops.color import srgb_to_linear
 
-        top = np.iinfo(img.dtype).max
-        # code x (1 / top) in float32: OpenImageIO's own conversion, so the values are its float read's
-        rgb = srgb_to_linear(np.arange(top + 1, dtype=np.float32) * np.float32(1.0 / top))[rgb]
-        colour = f"sRGB {fmt} decoded to linear"
-    elif integer:
-        from holoflow.imageops.color import srgb_to_linear
-
-        rgb = srgb_to_linear(np.asarray(rgb, dtype=np.float32))
+        if codes:     # one table entry per code: the same curve, 1 / 30 of the time on a 6656 px photo
+            top = np.iinfo(img.dtype).max
+            # code x (1 / top) in float32: OpenImageIO's own conversion, so the values are its float read's
+            rgb = srgb_to_linear(np.arange(top + 1, dtype=np.float32) * np.float32(1.0 / top))[rgb]
+        else:
+            rgb = srgb_to_linear(rgb)
         colour = f"sRGB {fmt} decoded to linear"
     try:
         rgb, counts = repair_colour(rgb)
