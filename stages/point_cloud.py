@@ -65,9 +65,11 @@ def main() -> int:
                 layer = background_layer(col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg,
                                          cfg.layer_stride, cfg.layer_slope)
             d = torch.where(keep, d, torch.full_like(d, float("nan")))
-        area = name == "pf" and cfg.pf_sampling == "area"
-        to_points = equirect_to_area_points if area else equirect_to_points
-        xyz, c = to_points(col, d)
+        if name == "pf" and cfg.pf_sampling == "area":
+            xyz, c = equirect_to_area_points(polar_colour(srgb, col, cfg.pf_polar_density), d,
+                                             cfg.pf_polar_density, cfg.pf_polar_from_deg)
+        else:
+            xyz, c = equirect_to_points(col, d)
         if layer is not None:
             lxyz, lc = equirect_to_points(layer[1], layer[0])
             xyz, c = torch.cat([xyz, lxyz]), torch.cat([c, lc])
@@ -78,12 +80,29 @@ def main() -> int:
         if name == "pf":
             counts["pf_dropped_fraction"] = round(float((~keep).double().mean()), 6)
         job.progress(i + 1, 3, "clouds")
+    polar = cfg.pf_sampling == "area" and cfg.pf_polar_density > 1
     job.output("pf.json").write_text(json.dumps({"width": pf_width, "sampling": cfg.pf_sampling,
-                                                 "spacing_rad": 2 * math.pi / pf_width}, sort_keys=True))
+                                                 "spacing_rad": 2 * math.pi / pf_width,
+                                                 "polar_density": cfg.pf_polar_density if polar else 1.0,
+                                                 "polar_from_deg": cfg.pf_polar_from_deg if polar else 90.0},
+                                                sort_keys=True))
     job.meta(pf_width=pf_width, pf_sampling=cfg.pf_sampling, points=counts, sky_fraction=round(sky_fraction, 6),
              shell_radius=round(shell, 6), grad_threshold=threshold, depth_size=list(depth.shape))
     print(f"point_cloud: {counts}, shell radius {shell:.3f} m, sky {100 * sky_fraction:.2f}%")
     return 0
+
+
+def polar_colour(srgb, col, polar_density: float):
+    """P_f's colour image for area sampling: col [h, w, 3] (the panorama srgb [H, W, 3] resampled to
+    P_f's grid) when ``polar_density`` is 1, else srgb resampled to h rows only, keeping up to
+    ``polar_density`` x w of its columns, so the denser polar rows average the panorama's own pixels."""
+    from holoflow.geometry.sampling import resize_equirect
+
+    h, w = col.shape[:2]
+    wide = min(srgb.shape[1], math.ceil(w * polar_density))
+    if polar_density <= 1 or wide <= w:
+        return col
+    return resize_equirect(srgb.permute(2, 0, 1), h, wide).permute(1, 2, 0)
 
 
 if __name__ == "__main__":

@@ -23,6 +23,13 @@ class PointCloudParams(StageParams):
     pf_sampling: str = param("area", "P_f's points: area = rows thinned by cos(lat), so every point covers "
                              "the same solid angle (no rings of thin Gaussians at the poles); grid = one "
                              "per pixel (the paper)", choices=("area", "grid"))
+    pf_polar_density: float = param(2.0, "pf_sampling area: rows beyond pf_polar_from_deg of latitude keep this many "
+                                    "times the points along the ring, their Gaussians as much narrower along it, "
+                                    "colours from the panorama at up to this many times P_f's width (a view of the "
+                                    "zenith or nadir resolves the detail a photo's polar rows hold; "
+                                    "holoflow/geometry/area.py); 1 = plain area sampling", ge=1, le=4)
+    pf_polar_from_deg: float = param(65.0, "pf_polar_density: from this latitude (north and south) to the pole",
+                                     "deg", ge=0, le=90)
     view_size: int = param(512, "pf_width 0: the view size P_f must stay sharp at (paper 512)", "px", ge=1)
     view_fov_deg: float = param(47.43, "pf_width 0: that view's field of view (paper 47.43)", "deg", gt=0,
                                 lt=180)
