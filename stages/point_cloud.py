@@ -7,7 +7,9 @@ points whose relative depth gradient exceeds ``grad_threshold`` (paper 0.4) drop
 units: holoflow/geometry/pointcloud.py, docs/conventions.md) once the occlusion edges that the depth
 draws as ramps are made steps (``edge_radius``: holoflow/geometry/edges.py); P_s at ``ps_width`` (paper 1024), the
 cloud the PCD set is projected from. Sky (inf depth) goes on a far shell of radius ``sky_radius``
-(0 = 2 x the 99th percentile of finite depth) so the scene stays enclosed. P_f also holds a
+(0 = 2 x the 99th percentile of finite depth) so the scene stays enclosed. P_f's polar caps (beyond
+``pf_polar_from_deg``) are sampled ``pf_polar_density`` times finer from the panorama itself
+(holoflow/geometry/area.py). P_f also holds a
 background layer (``layer_baseline`` > 0), after its grid's points: the far surface and the sky
 shell continued under every silhouette, as wide as an eye move of ``layer_baseline`` metres
 uncovers (holoflow/geometry/layers.py). Colour is resampled
@@ -27,7 +29,8 @@ def main() -> int:
     import kornia
     import torch
 
-    from holoflow.geometry.area import equirect_to_area_points, view_width
+    from holoflow.geometry.area import equirect_to_area_points, polar_caps, view_width
+    from holoflow.geometry.sampling import resize_equirect
     from holoflow.geometry.config import PointCloudParams
     from holoflow.geometry.edges import snap_depth_edges
     from holoflow.geometry.layers import background_layer
@@ -52,7 +55,7 @@ def main() -> int:
     shell = sky_radius if sky_radius > 0 else far_shell_radius(depth)
     # linear -> 8-bit sRGB, the PLY colour convention
     srgb = kornia.color.linear_rgb_to_rgb(rgb.clamp(0, 1).permute(2, 0, 1)).permute(1, 2, 0)
-    counts = {}
+    counts, pf_caps = {}, None
     for i, (name, width) in enumerate(widths.items()):
         col, d = resample_rgbd(srgb, depth, width)
         d = sky_to_shell(d, shell)
@@ -66,8 +69,13 @@ def main() -> int:
                                          cfg.layer_stride, cfg.layer_slope)
             d = torch.where(keep, d, torch.full_like(d, float("nan")))
         if name == "pf" and cfg.pf_sampling == "area":
-            xyz, c = equirect_to_area_points(polar_colour(srgb, col, cfg.pf_polar_density), d,
-                                             cfg.pf_polar_density, cfg.pf_polar_from_deg)
+            caps = polar_caps(pf_width, srgb.shape[1], cfg.pf_polar_density, cfg.pf_polar_from_deg)
+            cap_rgb = None if caps is None else resize_equirect(
+                srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)   # [h, w, 3]
+            xyz, c = equirect_to_area_points(col, d, caps, cap_rgb)
+            pf_caps = caps
+            counts["pf_caps"] = 0 if caps is None else int((xyz[:, 1].abs() > math.sin(math.radians(
+                caps.split_deg)) * torch.linalg.vector_norm(xyz, dim=1)).sum())
         else:
             xyz, c = equirect_to_points(col, d)
         if layer is not None:
@@ -80,29 +88,16 @@ def main() -> int:
         if name == "pf":
             counts["pf_dropped_fraction"] = round(float((~keep).double().mean()), 6)
         job.progress(i + 1, 3, "clouds")
-    polar = cfg.pf_sampling == "area" and cfg.pf_polar_density > 1
-    job.output("pf.json").write_text(json.dumps({"width": pf_width, "sampling": cfg.pf_sampling,
-                                                 "spacing_rad": 2 * math.pi / pf_width,
-                                                 "polar_density": cfg.pf_polar_density if polar else 1.0,
-                                                 "polar_from_deg": cfg.pf_polar_from_deg if polar else 90.0},
-                                                sort_keys=True))
+    pf = {"width": pf_width, "sampling": cfg.pf_sampling, "spacing_rad": 2 * math.pi / pf_width}
+    if pf_caps is not None:
+        pf["polar_caps"] = pf_caps.to_json()
+    if counts.get("pf_layer"):     # the last points of pf.ply, on every layer_stride-th row and column
+        pf["layer"] = {"points": counts["pf_layer"], "spacing_rad": 2 * math.pi * cfg.layer_stride / pf_width}
+    job.output("pf.json").write_text(json.dumps(pf, sort_keys=True))
     job.meta(pf_width=pf_width, pf_sampling=cfg.pf_sampling, points=counts, sky_fraction=round(sky_fraction, 6),
              shell_radius=round(shell, 6), grad_threshold=threshold, depth_size=list(depth.shape))
     print(f"point_cloud: {counts}, shell radius {shell:.3f} m, sky {100 * sky_fraction:.2f}%")
     return 0
-
-
-def polar_colour(srgb, col, polar_density: float):
-    """P_f's colour image for area sampling: col [h, w, 3] (the panorama srgb [H, W, 3] resampled to
-    P_f's grid) when ``polar_density`` is 1, else srgb resampled to h rows only, keeping up to
-    ``polar_density`` x w of its columns, so the denser polar rows average the panorama's own pixels."""
-    from holoflow.geometry.sampling import resize_equirect
-
-    h, w = col.shape[:2]
-    wide = min(srgb.shape[1], math.ceil(w * polar_density))
-    if polar_density <= 1 or wide <= w:
-        return col
-    return resize_equirect(srgb.permute(2, 0, 1), h, wide).permute(1, 2, 0)
 
 
 if __name__ == "__main__":

@@ -13,99 +13,159 @@ A point at radial distance r then covers a patch r d wide facing the centre: its
 standard deviation ``width`` x r d along the two tangent axes and ``thickness`` x r d along the ray
 (flattened: a disc facing the panorama centre), so neighbours cover each other at any view size.
 
-Polar rows (``polar_from_deg`` < |lat|) may keep ``polar_density`` times as many points along the ring
-(capped at the colour image's width): a photo's polar rows are W px round, so a view of the zenith or
-nadir resolves tangential detail that one point per d x d loses. Those points' Gaussians are narrowed
-along the ring by the same factor (ellipses: ``width`` x r d / density east-west, ``width`` x r d
-north-south), so they still tile the ring without overlapping more.
+**Polar caps** (``PolarCaps``). A photo's rows near a pole are still W px round and its rows finer
+than P_f's, so a view of the zenith or nadir resolves detail that one point per d x d loses (the
+zenith/nadir cameras scored 3.8 dB below the others on a real room). Beyond ``from_deg`` of latitude
+(the first row of the caps' grid past P_f's last row) the caps are sampled from the panorama on a grid ``density`` times finer than P_f's (rows at most the
+panorama's own) with ``density`` times P_f's points along each ring (at most the grid's width); their
+Gaussians are ellipses sized by that finer spacing across and along the ring (local x turned east).
+The caps' depth is read from P_f's depth grid (its edge and gradient filters apply).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 
 from holoflow.geometry.sphere import lonlat_to_direction
 
 
-def ring_density(lat: torch.Tensor, polar_density: float = 1.0, polar_from_deg: float = 90.0) -> torch.Tensor:
-    """Points along the ring per area-sampling point, at latitudes lat [...] (radians): ``polar_density``
-    where |lat| > ``polar_from_deg``, else 1 (module docstring)."""
-    polar = lat.abs() > math.radians(polar_from_deg)
-    return torch.where(polar, torch.full_like(lat, float(polar_density)), torch.ones_like(lat))
+@dataclass(frozen=True)
+class PolarCaps:
+    """How P_f's polar caps are sampled (module docstring): the rows of a grid ``width`` px wide
+    (``width // 2`` rows) beyond ``split_deg`` of latitude, ``ring_points`` x cos(lat) points a ring
+    (at most ``width``); P_f keeps its rows within ``split_deg``. ``split_deg`` lies between P_f's
+    last row and the caps' first, which touch (no wider gap than either grid's spacing)."""
+
+    split_deg: float
+    width: int
+    ring_points: float
+
+    @property
+    def row_rad(self) -> float:
+        """Angle between two cap rows (radians)."""
+        return 2.0 * math.pi / self.width
+
+    def ring_rad(self, lat: torch.Tensor) -> torch.Tensor:
+        """Angle between two neighbours along the ring at latitudes lat [...] (radians of arc)."""
+        n = torch.clamp(self.ring_points * torch.cos(lat), min=1.0, max=float(self.width))
+        return 2.0 * math.pi * torch.cos(lat) / n
+
+    def to_json(self) -> dict:
+        return {"split_deg": self.split_deg, "width": self.width, "ring_points": self.ring_points}
 
 
-def area_counts(height: int, width: int, polar_density: float = 1.0, polar_from_deg: float = 90.0,
-                max_count: int | None = None) -> torch.Tensor:
-    """Points per row [H] (long) of an area sampling of an H x W equirect grid (module docstring), at
-    most ``max_count`` (default W) a row."""
-    lat = math.pi / 2 - (torch.arange(height, dtype=torch.float64) + 0.5) * (math.pi / height)
-    n = torch.round(width * torch.cos(lat) * ring_density(lat, polar_density, polar_from_deg))
-    return torch.clamp(n, 1, max_count or width).long()
+def polar_caps(pf_width: int, pano_width: int, density: float, from_deg: float) -> PolarCaps | None:
+    """P_f's caps for a ``pf_width`` px P_f of a ``pano_width`` px panorama at ``density`` (1 or
+    from_deg >= 90: none): P_f keeps its rows up to ``from_deg``, the caps take over from the first row
+    of a grid min(pano_width, density x pf_width) px wide that reaches past P_f's last row's edge,
+    with density x pf_width points a ring at the equator's scale."""
+    if density <= 1.0 or from_deg >= 90.0:
+        return None
+    width = max(pf_width, min(pano_width, int(math.ceil(density * pf_width))))
+    width -= width % 2
+    lat = row_latitudes(pf_width // 2).abs()
+    last = float(lat[lat <= math.radians(from_deg)].max())                  # P_f's last row centre
+    step, cap_step = math.pi / (pf_width // 2), math.pi / (width // 2)
+    cap = row_latitudes(width // 2).abs()
+    first = float(cap[cap > last + step / 2 - cap_step / 2].min())         # the caps' first row centre
+    return PolarCaps(math.degrees(0.5 * (last + first)), width, float(density * pf_width))
 
 
-def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, polar_density: float = 1.0,
-                polar_from_deg: float = 90.0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Area sampling of an equirect RGB-D image: rgb [H, Wc, C], radial_depth [H, W] (metres; Wc >= W:
-    the colour may keep more columns than the depth) -> directions [N, 3] (unit, world), rgb [N, C] (box
-    average over each point's longitude interval) and depth [N] (the pixel under the point; not filtered
-    here), rows top to bottom, longitudes ascending from -pi. Rows keep ``area_counts(H, W,
-    polar_density, polar_from_deg, Wc)`` points."""
-    H, Wd = radial_depth.shape
-    W = rgb.shape[1]
-    if rgb.shape[0] != H or W < Wd:
-        raise ValueError(f"area_sample: rgb {tuple(rgb.shape)} must have depth's {H} rows and >= {Wd} columns")
-    counts = area_counts(H, Wd, polar_density, polar_from_deg, W).to(rgb.device)     # [H]
-    row = torch.repeat_interleave(torch.arange(H, device=rgb.device), counts)   # [N]
+def row_latitudes(height: int) -> torch.Tensor:
+    """[H] latitude (radians, float64) of each row centre of an equirect grid H rows high."""
+    return math.pi / 2 - (torch.arange(height, dtype=torch.float64) + 0.5) * (math.pi / height)
+
+
+def area_counts(height: int, width: int) -> torch.Tensor:
+    """Points per row [H] (long) of an area sampling of an H x W equirect grid (module docstring)."""
+    return torch.clamp(torch.round(width * torch.cos(row_latitudes(height))), min=1).long()
+
+
+def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, counts: torch.Tensor | None = None,
+                rows: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Area sampling of an equirect RGB-D image: rgb [H, W, C], radial_depth [Hd, Wd] (metres, any
+    size; usually H x W) -> directions [N, 3] (unit, world), rgb [N, C] (box average over each point's
+    longitude interval) and depth [N] (the depth pixel under the point's centre; not filtered here),
+    rows top to bottom, longitudes ascending from -pi. ``counts`` [H]: points per row (default
+    ``area_counts``); ``rows`` [H] bool: the rows to sample (default all)."""
+    H, W = rgb.shape[:2]
+    Hd, Wd = radial_depth.shape
+    counts = (area_counts(H, W) if counts is None else counts).to(rgb.device)          # [H]
+    if rows is not None:
+        counts = torch.where(rows.to(rgb.device), counts, torch.zeros_like(counts))
+    row = torch.repeat_interleave(torch.arange(H, device=rgb.device), counts)          # [N]
     first = torch.cumsum(counts, 0) - counts
-    j = torch.arange(int(counts.sum()), device=rgb.device) - first[row]         # index within the row
+    j = torch.arange(int(counts.sum()), device=rgb.device) - first[row]                # index within the row
     n = counts[row].to(torch.float64)
-    u0, u1 = j * (W / n), (j + 1) * (W / n)                                     # [N] interval, pixels
+    u0, u1 = j * (W / n), (j + 1) * (W / n)                                            # [N] interval, pixels
     prefix = torch.cat([torch.zeros_like(rgb[:, :1]), torch.cumsum(rgb.to(torch.float64), 1)], 1)  # [H, W + 1, C]
 
-    def integral(u: torch.Tensor) -> torch.Tensor:                              # sum of the row over [0, u)
+    def integral(u: torch.Tensor) -> torch.Tensor:                                     # row sum over [0, u)
         k = torch.clamp(torch.floor(u).long(), 0, W - 1)
         return prefix[row, k] + (u - k)[:, None] * rgb[row, k].to(torch.float64)
 
-    colour = ((integral(u1) - integral(u0)) / (u1 - u0)[:, None]).to(rgb.dtype)  # [N, C]
-    centre = 0.5 * (u0 + u1)
-    depth = radial_depth[row, torch.clamp(torch.floor(centre * (Wd / W)).long(), 0, Wd - 1)]
-    lon = centre * (2 * math.pi / W) - math.pi
-    lat = math.pi / 2 - (row.to(torch.float64) + 0.5) * (math.pi / H)
-    dirs = lonlat_to_direction(lon, lat).to(radial_depth.dtype)
+    colour = ((integral(u1) - integral(u0)) / (u1 - u0)[:, None]).to(rgb.dtype)      # [N, C]
+    centre = 0.5 * (u0 + u1)                                                           # [N] pixels
+    lat = row_latitudes(H).to(rgb.device)[row]
+    drow = row if Hd == H else torch.floor((row + 0.5) * (Hd / H)).long()
+    dcol = torch.floor(centre if Wd == W else centre * (Wd / W)).long()
+    depth = radial_depth[drow.clamp(0, Hd - 1), dcol.clamp(0, Wd - 1)]
+    dirs = lonlat_to_direction(centre * (2 * math.pi / W) - math.pi, lat).to(radial_depth.dtype)
     return dirs, colour, depth
 
 
-def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, polar_density: float = 1.0,
-                            polar_from_deg: float = 90.0) -> tuple[torch.Tensor, torch.Tensor]:
+def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, caps: PolarCaps | None = None,
+                            cap_rgb: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``equirect_to_points`` sampled by area: xyz [N, 3] (world, depth's dtype) and rgb [N, C] of the
-    area samples with finite depth > 0 (module docstring; ``area_sample``'s arguments)."""
-    dirs, colour, depth = area_sample(rgb, radial_depth, polar_density, polar_from_deg)
+    area samples with finite depth > 0 (module docstring). rgb [H, W, C] and radial_depth [H, W] are
+    P_f's grid; with ``caps``, the rows beyond caps.split_deg come from cap_rgb [caps.width // 2,
+    caps.width, C] instead (depth still from radial_depth). Points run from the north pole south."""
+    if caps is None:
+        parts = [area_sample(rgb, radial_depth)]
+    else:
+        if cap_rgb is None or tuple(cap_rgb.shape[:2]) != (caps.width // 2, caps.width):
+            raise ValueError(f"equirect_to_area_points: cap_rgb must be {caps.width // 2} x {caps.width}")
+        edge = math.radians(caps.split_deg)
+        lat, cap_lat = row_latitudes(rgb.shape[0]), row_latitudes(cap_rgb.shape[0])
+        ring = torch.clamp(torch.round(caps.ring_points * torch.cos(cap_lat)), 1, caps.width).long()
+        parts = [area_sample(cap_rgb, radial_depth, ring, cap_lat > edge),
+                 area_sample(rgb, radial_depth, rows=lat.abs() < edge),
+                 area_sample(cap_rgb, radial_depth, ring, cap_lat < -edge)]
+    dirs, colour, depth = (torch.cat(x) for x in zip(*parts))
     valid = torch.isfinite(depth) & (depth > 0)
     return dirs[valid] * depth[valid][:, None], colour[valid]
 
 
 def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.6, thickness: float = 0.1,
-                        polar_density: float = 1.0, polar_from_deg: float = 90.0) -> tuple[torch.Tensor, torch.Tensor]:
+                        caps: PolarCaps | None = None, layer_points: int = 0, layer_spacing_rad: float = 0.0
+                        ) -> tuple[torch.Tensor, torch.Tensor]:
     """Scales [N, 3] (metres) and quaternions [N, 4] (w, x, y, z) of Gaussians at points xyz [N, 3]
     sampled from the panorama centre (the origin) with angular spacing ``spacing_rad``: standard
     deviation ``width`` x r spacing along the tangent axes, ``thickness`` x r spacing along the ray
-    (local z turned onto the ray). r is clamped away from 0. Points of the denser polar rows
-    (``ring_density`` > 1) get ``width`` x r spacing / density along the ring (local x turned east)."""
+    (local z turned onto the ray). r is clamped away from 0. Points in the ``caps`` use the caps'
+    spacings instead: caps.ring_rad along the ring (local x turned east), caps.row_rad across it; the
+    last ``layer_points`` points (P_f's background layer, a sparser grid) ``layer_spacing_rad``."""
     r = torch.linalg.vector_norm(xyz, dim=-1).clamp_min(1e-9)                   # [N]
     d = xyz / r[:, None]
-    s = r * spacing_rad
-    lat = torch.asin((-d[:, 1]).clamp(-1.0, 1.0))
-    along = s / ring_density(lat, polar_density, polar_from_deg)                # [N] east-west
-    scales = torch.stack([width * along, width * s, thickness * s], -1)
+    layer = torch.arange(len(r), device=r.device) >= len(r) - layer_points
+    across = torch.where(layer, layer_spacing_rad, spacing_rad).to(r.dtype)
+    along = across
+    in_cap = torch.zeros_like(layer)
+    if caps is not None:
+        lat = torch.asin((-d[:, 1]).clamp(-1.0, 1.0))
+        in_cap = (lat.abs() > math.radians(caps.split_deg)) & ~layer
+        across = torch.where(in_cap, caps.row_rad, across)
+        along = torch.where(in_cap, caps.ring_rad(lat).to(r.dtype), across)
+    scales = torch.stack([width * r * along, width * r * across, thickness * r * across], -1)
     # the shortest rotation taking +z to d: q = (1 + d_z, -d_y, d_x, 0), normalised; d = -z: 180 deg about x
     q = torch.stack([1 + d[:, 2], -d[:, 1], d[:, 0], torch.zeros_like(r)], -1)
     flip = (1 + d[:, 2]) < 1e-9
     q = torch.where(flip[:, None], q.new_tensor([0.0, 1.0, 0.0, 0.0]), q)
     q = q / torch.linalg.vector_norm(q, dim=-1, keepdim=True)
-    narrow = along < s
-    if bool(narrow.any()):     # turn the disc about its normal so that local x points east
-        q[narrow] = _turn_east(q[narrow], d[narrow])
+    if bool(in_cap.any()):     # turn the ellipse about its normal so that local x points east
+        q[in_cap] = _turn_east(q[in_cap], d[in_cap])
     return scales, q
 
 
@@ -120,7 +180,7 @@ def _turn_east(q: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
     psi = torch.atan2((east * R[:, :, 1]).sum(-1), (east * R[:, :, 0]).sum(-1))   # [M]
     c, s = torch.cos(psi / 2), torch.sin(psi / 2)
     w, x, y, z = q.unbind(-1)
-    # q (x) (c, 0, 0, s): the Hamilton product with a turn about z
+    # q (x) (c, 0, 0, s): the Hamilton product with a turn about local z
     return torch.stack([w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s], -1)
 
 

@@ -23,13 +23,13 @@ class PointCloudParams(StageParams):
     pf_sampling: str = param("area", "P_f's points: area = rows thinned by cos(lat), so every point covers "
                              "the same solid angle (no rings of thin Gaussians at the poles); grid = one "
                              "per pixel (the paper)", choices=("area", "grid"))
-    pf_polar_density: float = param(2.0, "pf_sampling area: rows beyond pf_polar_from_deg of latitude keep this many "
-                                    "times the points along the ring, their Gaussians as much narrower along it, "
-                                    "colours from the panorama at up to this many times P_f's width (a view of the "
-                                    "zenith or nadir resolves the detail a photo's polar rows hold; "
-                                    "holoflow/geometry/area.py); 1 = plain area sampling", ge=1, le=4)
-    pf_polar_from_deg: float = param(65.0, "pf_polar_density: from this latitude (north and south) to the pole",
-                                     "deg", ge=0, le=90)
+    pf_polar_density: float = param(2.0, "pf_sampling area: P_f's polar caps (beyond pf_polar_from_deg) are sampled "
+                                    "from the panorama on a grid this many times finer than P_f's (rows at most "
+                                    "the panorama's own), with this many times P_f's points along each ring: a "
+                                    "photo's polar rows hold detail a view of the zenith or nadir resolves "
+                                    "(holoflow/geometry/area.py); 1 = none", ge=1, le=4)
+    pf_polar_from_deg: float = param(65.0, "pf_polar_density: the caps' edge, latitude north and south", "deg",
+                                     ge=0, le=90)
     view_size: int = param(512, "pf_width 0: the view size P_f must stay sharp at (paper 512)", "px", ge=1)
     view_fov_deg: float = param(47.43, "pf_width 0: that view's field of view (paper 47.43)", "deg", gt=0,
                                 lt=180)
@@ -55,8 +55,9 @@ class PointCloudParams(StageParams):
     layer_slope: bool = param(False, "background layer: extrapolate the far surface's inverse-depth slope from "
                               "the two pixels at the edge (off: the edge pixel's depth; an estimated depth's "
                               "edge pixels are rarely the far surface's own)")
-    layer_stride: int = param(1, "background layer: on every this-many-th row and column of P_f's grid (2 only "
-                              "with init_scale knn: the footprint init sizes every point by the grid's spacing)",
+    layer_stride: int = param(2, "background layer: on every this-many-th row and column of P_f's grid, its "
+                              "Gaussians as much wider (the layer is only seen from off the centre; 2: a "
+                              "quarter of the points, 0.5 m empties unchanged, holoflow/geometry/layers.py)",
                               ge=1)
 
 

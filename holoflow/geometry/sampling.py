@@ -282,12 +282,11 @@ def ring_prefilter(pano: torch.Tensor, angle: float) -> torch.Tensor:
     wide = cols > 1.0
     if not bool(wide.any()):
         return pano
-    rows = torch.nonzero(wide).flatten()
-    r0, r1 = int(rows.min()), int(rows.max()) + 1          # rows r0..r1 (both polar bands in between)
-    x = pano[..., r0:r1, :].double()                                                   # [..., h, W]
+    rows = torch.nonzero(wide).flatten()                    # the two polar bands
+    x = pano.index_select(-2, rows).double()                                           # [..., h, W]
     prefix = torch.cat([torch.zeros_like(x[..., :1]), torch.cumsum(x, -1)], -1)        # [..., h, W + 1]
     total = prefix[..., -1:]
-    half = 0.5 * cols[r0:r1, None]                                                     # [h, 1]
+    half = 0.5 * cols[rows, None]                                                      # [h, 1]
     centre = torch.arange(W, dtype=torch.float64, device=pano.device) + 0.5            # [W]
 
     def integral(u: torch.Tensor) -> torch.Tensor:    # sum of the row over [0, u), u [h, W] any real
@@ -296,9 +295,8 @@ def ring_prefilter(pano: torch.Tensor, angle: float) -> torch.Tensor:
         k = torch.clamp(torch.floor(r).long(), 0, W - 1).expand(x.shape)
         return turns * total + torch.gather(prefix, -1, k) + (r - k) * torch.gather(x, -1, k)
 
-    box = (integral(centre + half) - integral(centre - half)) / (2.0 * half)
     out = pano.clone()
-    out[..., r0:r1, :] = torch.where(wide[r0:r1, None], box, x).to(pano.dtype)
+    out[..., rows, :] = ((integral(centre + half) - integral(centre - half)) / (2.0 * half)).to(pano.dtype)
     return out
 
 

@@ -27,12 +27,12 @@ TRAIN_SEED_STRIDE = 1_000_003   # train_seed k moves every phase's seed by k x t
 
 
 def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str = "cpu",
-               sh_degree: int = 0, footprint: tuple[float, ...] | None = None):
+               sh_degree: int = 0, footprint: tuple | None = None):
     """Gaussians (SH degree ``sh_degree``, higher bands 0) at the points xyz [N, 3] metres, coloured
     rgb [N, 3] uint8 (sRGB), with
     initial ``opacity`` (a stage's ``init_opacity``; 3DGS: 0.1; a surface point cloud tolerates more,
     which shortens training), on ``device``. ``footprint`` = (angular spacing of the cloud in
-    radians, width, thickness[, polar density, its latitude in degrees]): each Gaussian covers its point's pixel
+    radians, width, thickness[, polar caps, layer points, layer spacing]): each Gaussian covers its point's pixel
     (holoflow.geometry.area.footprint_gaussians); None: the 3DGS nearest-neighbour size."""
     from holoflow.splat import GaussianModel
 
@@ -50,9 +50,10 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str 
                                      sh_degree=sh_degree, opacity=opacity, **shape).to(device)
 
 
-def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple[float, ...] | None:
+def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
     """``init_model``'s footprint for the P_f of a point_cloud output folder: (its pf.json's angular
-    spacing, cfg.footprint_width, cfg.footprint_thickness, its polar density and latitude), or None with ``init_scale: knn`` or no
+    spacing, cfg.footprint_width, cfg.footprint_thickness, its polar caps or None, its background layer's
+    point count and spacing), or None with ``init_scale: knn`` or no
     pf.json (a cloud of the user's own)."""
     import json
     from pathlib import Path
@@ -60,9 +61,13 @@ def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple[float, ...] | None:
     path = Path(cloud_dir) / "pf.json"
     if cfg.init_scale != "footprint" or not path.is_file():
         return None
+    from holoflow.geometry.area import PolarCaps
+
     pf = json.loads(path.read_text())
-    return (float(pf["spacing_rad"]), cfg.footprint_width, cfg.footprint_thickness,
-            float(pf.get("polar_density", 1.0)), float(pf.get("polar_from_deg", 90.0)))
+    caps = PolarCaps(**pf["polar_caps"]) if "polar_caps" in pf else None
+    layer = pf.get("layer", {"points": 0, "spacing_rad": 0.0})
+    return (float(pf["spacing_rad"]), cfg.footprint_width, cfg.footprint_thickness, caps, int(layer["points"]),
+            float(layer["spacing_rad"]))
 
 
 def panorama_extent(xyz: np.ndarray) -> float:

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from holoflow.geometry.area import area_counts, area_sample, equirect_to_area_points, footprint_gaussians
+from holoflow.geometry.area import (area_counts, area_sample, equirect_to_area_points, footprint_gaussians,
+                                    polar_caps)
 from holoflow.geometry.camera import intrinsics_from_fov
 from holoflow.geometry.config import PointCloudParams
 from holoflow.geometry.pointcloud import equirect_to_points
@@ -19,13 +20,19 @@ from holoflow.splat import render
 COLOUR = (0.6, 0.45, 0.3)                # sRGB, the PLY convention
 
 
-def _room(width: int, sampling: str, cfg: TransferOptParams):
-    """Gaussians of a 2 m sphere of one colour, P_f ``width`` px wide, sampled as ``sampling`` says."""
+def _room(width: int, sampling: str, cfg: TransferOptParams, pc: PointCloudParams = PointCloudParams()):
+    """Gaussians of a 2 m sphere of one colour, P_f ``width`` px wide from a panorama twice as wide,
+    sampled as ``sampling`` says (area: with ``pc``'s polar caps, as point_cloud makes them)."""
     H = width // 2
     rgb = torch.tensor(COLOUR, dtype=torch.float64).expand(H, width, 3)
     depth = torch.full((H, width), 2.0, dtype=torch.float64)
-    xyz, c = (equirect_to_area_points if sampling == "area" else equirect_to_points)(rgb, depth)
-    footprint = (2 * math.pi / width, cfg.footprint_width, cfg.footprint_thickness)
+    caps = polar_caps(width, 2 * width, pc.pf_polar_density, pc.pf_polar_from_deg)
+    if sampling == "area":
+        cap_rgb = None if caps is None else rgb[:1, :1].expand(caps.width // 2, caps.width, 3)
+        xyz, c = equirect_to_area_points(rgb, depth, caps, cap_rgb)
+    else:
+        xyz, c = equirect_to_points(rgb, depth)
+    footprint = (2 * math.pi / width, cfg.footprint_width, cfg.footprint_thickness, caps)
     return init_model(xyz.numpy(), (c.numpy() * 255 + 0.5).astype(np.uint8), cfg.init_opacity,
                       footprint=footprint if cfg.init_scale == "footprint" else None)
 
@@ -84,3 +91,72 @@ def test_footprint_discs_face_the_centre(d):
     assert torch.allclose(scales, torch.tensor([[0.018, 0.018, 0.003]], dtype=torch.float64))
     R = quat_to_rotmat(q)[0]
     assert torch.allclose(R[:, 2], xyz[0] / 3.0, atol=1e-12)                  # local z along the ray
+
+
+def _ring_texture(width: int) -> torch.Tensor:
+    """sRGB [width / 2, width, 3]: 24 light-dark cycles around every ring (fine near the poles)."""
+    lon = (torch.arange(width, dtype=torch.float64) + 0.5) * (2 * math.pi / width) - math.pi
+    v = 0.5 + 0.35 * torch.sin(24 * lon)
+    return v[None, :, None].expand(width // 2, width, 3).clone()
+
+
+def test_polar_caps_keep_the_detail_of_the_polar_rows():
+    """Detail along the rings near a pole (a photo's polar rows are W px round) is lost by one point per
+    d x d of P_f and kept by the caps (finer grid from the panorama, more points a ring, narrow
+    ellipses): the untrained Gaussians' views straight up and down against the panorama's own."""
+    from holoflow.geometry.sampling import equirect_to_pinhole
+
+    pf_width, size = 256, 128
+    pano = _ring_texture(2 * pf_width)
+    col = torch.nn.functional.avg_pool2d(pano.permute(2, 0, 1)[None], 2)[0].permute(1, 2, 0)   # P_f's grid
+    depth = torch.full((pf_width // 2, pf_width), 2.0, dtype=torch.float64)
+    rig = base_rig(38)[[0, -1]]
+    K = intrinsics_from_fov(47.43, size, size)
+    want = equirect_to_pinhole(pano.permute(2, 0, 1).float(), K[None].expand(2, 3, 3), rig.float(), size, size,
+                               mode="antialias").permute(0, 2, 3, 1)
+    cfg = TransferOptParams()
+    psnr = {}
+    for density in (1.0, 2.0):
+        caps = polar_caps(pf_width, 2 * pf_width, density, 65.0)
+        xyz, c = equirect_to_area_points(col, depth, caps, None if caps is None else pano)
+        model = init_model(xyz.numpy(), (c.numpy() * 255 + 0.5).astype(np.uint8), cfg.init_opacity,
+                           footprint=(2 * math.pi / pf_width, cfg.footprint_width, cfg.footprint_thickness, caps))
+        with torch.no_grad():
+            rgb = render(model, rig.float(), K[None].expand(2, 3, 3).float(), size, size, backend="cpu",
+                         depth=False)["rgb"]
+        psnr[density] = float(-10 * torch.log10(((rgb - want) ** 2).mean()))
+    # measured: 16.3 dB without the caps, 20.4 with (untrained discs low-pass the pattern either way)
+    assert psnr[2.0] > psnr[1.0] + 3.0, psnr
+
+
+def test_polar_caps_meet_pf_without_a_gap():
+    """P_f's last row and the caps' first are no further apart than P_f's own rows, at any edge, and the
+    split between them lies between the two."""
+    for pf_width, pano_width, density, edge in [(1536, 2048, 2.0, 65.0), (512, 4096, 2.0, 55.0),
+                                               (256, 256, 2.0, 70.0), (1000, 1500, 1.5, 60.3)]:
+        caps = polar_caps(pf_width, pano_width, density, edge)
+        split = math.radians(caps.split_deg)
+        lat = torch.pi / 2 - (torch.arange(pf_width // 2) + 0.5) * torch.pi / (pf_width // 2)
+        cap = torch.pi / 2 - (torch.arange(caps.width // 2) + 0.5) * torch.pi / (caps.width // 2)
+        last, first = float(lat[lat < split].max()), float(cap[cap > split].min())
+        assert last < split < first and last <= math.radians(edge)
+        assert first - last <= torch.pi / (pf_width // 2) + 1e-12, (pf_width, pano_width, first - last)
+    assert polar_caps(1536, 2048, 1.0, 65.0) is None
+
+
+def test_cap_ellipses_are_narrow_along_the_ring():
+    from holoflow.geometry.camera import quat_to_rotmat
+    from holoflow.geometry.sphere import lonlat_to_direction
+
+    caps = polar_caps(512, 1024, 2.0, 60.0)
+    lon = torch.tensor([0.3, -2.0, 1.0], dtype=torch.float64)
+    lat = torch.tensor([1.2, -1.3, 0.2], dtype=torch.float64)                 # north cap, south cap, P_f
+    xyz = 3.0 * lonlat_to_direction(lon, lat)
+    scales, q = footprint_gaussians(xyz, 2 * math.pi / 512, 0.6, 0.1, caps)
+    R = quat_to_rotmat(q)
+    torch.testing.assert_close(R[:, :, 2], xyz / 3.0)                        # facing the centre, as before
+    east = torch.stack([torch.cos(lon), torch.zeros_like(lon), -torch.sin(lon)], -1)
+    assert torch.allclose((R[:2, :, 0] * east[:2]).sum(-1).abs(), torch.ones(2, dtype=torch.float64))
+    torch.testing.assert_close(scales[:2, 0], 0.6 * 3.0 * caps.ring_rad(lat[:2]))
+    torch.testing.assert_close(scales[:2, 1], torch.full((2,), 0.6 * 3.0 * caps.row_rad, dtype=torch.float64))
+    torch.testing.assert_close(scales[2], torch.tensor([0.6, 0.6, 0.1], dtype=torch.float64) * 3 * 2 * math.pi / 512)
