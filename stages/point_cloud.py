@@ -9,7 +9,8 @@ draws as ramps are made steps (``edge_radius``: holoflow/geometry/edges.py); P_s
 cloud the PCD set is projected from. Sky (inf depth) goes on a far shell of radius ``sky_radius``
 (0 = 2 x the 99th percentile of finite depth) so the scene stays enclosed. P_f's polar caps (beyond
 ``pf_polar_from_deg``) are sampled ``pf_polar_density`` times finer from the panorama itself
-(holoflow/geometry/area.py). P_f also holds a
+where the panorama's polar rows hold more detail than P_f's rings keep (``pf_polar_detail``;
+holoflow/geometry/area.py). P_f also holds a
 background layer (``layer_baseline`` > 0), after its grid's points: the far surface and the sky
 shell continued under every silhouette, as wide as an eye move of ``layer_baseline`` metres
 uncovers (holoflow/geometry/layers.py). Colour is resampled
@@ -29,8 +30,7 @@ def main() -> int:
     import kornia
     import torch
 
-    from holoflow.geometry.area import equirect_to_area_points, polar_caps, view_width
-    from holoflow.geometry.sampling import resize_equirect
+    from holoflow.geometry.area import view_width
     from holoflow.geometry.config import PointCloudParams
     from holoflow.geometry.edges import snap_depth_edges
     from holoflow.geometry.layers import background_layer
@@ -55,7 +55,7 @@ def main() -> int:
     shell = sky_radius if sky_radius > 0 else far_shell_radius(depth)
     # linear -> 8-bit sRGB, the PLY colour convention
     srgb = kornia.color.linear_rgb_to_rgb(rgb.clamp(0, 1).permute(2, 0, 1)).permute(1, 2, 0)
-    counts, pf_caps = {}, None
+    counts, pf_caps, polar_detail = {}, None, None
     for i, (name, width) in enumerate(widths.items()):
         col, d = resample_rgbd(srgb, depth, width)
         d = sky_to_shell(d, shell)
@@ -69,13 +69,7 @@ def main() -> int:
                                          cfg.layer_stride, cfg.layer_slope)
             d = torch.where(keep, d, torch.full_like(d, float("nan")))
         if name == "pf" and cfg.pf_sampling == "area":
-            caps = polar_caps(pf_width, srgb.shape[1], cfg.pf_polar_density, cfg.pf_polar_from_deg)
-            cap_rgb = None if caps is None else resize_equirect(
-                srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)   # [h, w, 3]
-            xyz, c = equirect_to_area_points(col, d, caps, cap_rgb)
-            pf_caps = caps
-            counts["pf_caps"] = 0 if caps is None else int((xyz[:, 1].abs() > math.sin(math.radians(
-                caps.split_deg)) * torch.linalg.vector_norm(xyz, dim=1)).sum())
+            xyz, c, pf_caps, polar_detail = pf_area_points(srgb, col, d, cfg)
         else:
             xyz, c = equirect_to_points(col, d)
         if layer is not None:
@@ -94,10 +88,33 @@ def main() -> int:
     if counts.get("pf_layer"):     # the last points of pf.ply, on every layer_stride-th row and column
         pf["layer"] = {"points": counts["pf_layer"], "spacing_rad": 2 * math.pi * cfg.layer_stride / pf_width}
     job.output("pf.json").write_text(json.dumps(pf, sort_keys=True))
-    job.meta(pf_width=pf_width, pf_sampling=cfg.pf_sampling, points=counts, sky_fraction=round(sky_fraction, 6),
+    job.meta(pf_width=pf_width, pf_sampling=cfg.pf_sampling, points=counts, polar_caps=pf.get("polar_caps"),
+             polar_detail=polar_detail, sky_fraction=round(sky_fraction, 6),
              shell_radius=round(shell, 6), grad_threshold=threshold, depth_size=list(depth.shape))
     print(f"point_cloud: {counts}, shell radius {shell:.3f} m, sky {100 * sky_fraction:.2f}%")
+    if polar_detail is not None:
+        on = [k for k in ("north", "south") if pf_caps is not None and getattr(pf_caps, k)]
+        print(f"point_cloud: polar caps {' and '.join(on) or 'off'} (what P_f's rings would lose: "
+              f"north {polar_detail['north']:.3g}, south {polar_detail['south']:.3g}, sides {polar_detail['sides']:.3g})")
     return 0
+
+
+def pf_area_points(srgb, col, d, cfg):
+    """P_f's points by area (holoflow/geometry/area.py) from its grid col [h, w, 3] (sRGB) and d [h, w]
+    (radial m, NaN = dropped), with the polar caps sampled from the panorama srgb [H, W, 3] where it
+    calls for them: (xyz [N, 3], colour [N, 3], the caps or None, what P_f's rings would lose per
+    region or None)."""
+    from holoflow.geometry.area import called_for, equirect_to_area_points, polar_caps
+    from holoflow.geometry.sampling import resize_equirect
+
+    pf_width = col.shape[1]
+    caps = polar_caps(pf_width, srgb.shape[1], cfg.pf_polar_density, cfg.pf_polar_from_deg)
+    if caps is None:
+        return (*equirect_to_area_points(col, d), None, None)
+    cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)   # [h, w, 3]
+    caps, detail = called_for(caps, cap_rgb, pf_width, cfg.pf_polar_detail)
+    xyz, c = equirect_to_area_points(col, d, caps, cap_rgb)
+    return xyz, c, caps, {k: float(f"{v:.4g}") for k, v in detail.items()}
 
 
 if __name__ == "__main__":

@@ -15,11 +15,13 @@ standard deviation ``width`` x r d along the two tangent axes and ``thickness`` 
 
 **Polar caps** (``PolarCaps``). A photo's rows near a pole are still W px round and its rows finer
 than P_f's, so a view of the zenith or nadir resolves detail that one point per d x d loses (the
-zenith/nadir cameras scored 3.8 dB below the others on a real room). Beyond ``from_deg`` of latitude
-(the first row of the caps' grid past P_f's last row) the caps are sampled from the panorama on a grid ``density`` times finer than P_f's (rows at most the
-panorama's own) with ``density`` times P_f's points along each ring (at most the grid's width); their
-Gaussians are ellipses sized by that finer spacing across and along the ring (local x turned east).
-The caps' depth is read from P_f's depth grid (its edge and gradient filters apply).
+zenith/nadir cameras scored 3.8 dB below the others on a real room). Beyond a latitude (P_f keeps its
+rows up to ``from_deg``; the caps start at the first row of their grid that reaches past P_f's last
+row's edge, so the two touch) the caps are sampled from the panorama on a grid ``density`` times finer
+than P_f's (rows at most the panorama's own) with ``density`` times P_f's points along each ring (at
+most the grid's width); their Gaussians are ellipses sized by that finer spacing across and along the
+ring (local x turned east). The caps' depth is read from P_f's depth grid (its edge and gradient
+filters apply).
 """
 from __future__ import annotations
 
@@ -41,6 +43,8 @@ class PolarCaps:
     split_deg: float
     width: int
     ring_points: float
+    north: bool = True
+    south: bool = True
 
     @property
     def row_rad(self) -> float:
@@ -53,7 +57,13 @@ class PolarCaps:
         return 2.0 * math.pi * torch.cos(lat) / n
 
     def to_json(self) -> dict:
-        return {"split_deg": self.split_deg, "width": self.width, "ring_points": self.ring_points}
+        return {"split_deg": self.split_deg, "width": self.width, "ring_points": self.ring_points,
+                "north": self.north, "south": self.south}
+
+    def holds(self, lat: torch.Tensor) -> torch.Tensor:
+        """[...] bool: latitudes lat [...] (radians) inside a cap that is on."""
+        edge = math.radians(self.split_deg)
+        return ((lat > edge) & self.north) | ((lat < -edge) & self.south)
 
 
 def polar_caps(pf_width: int, pano_width: int, density: float, from_deg: float) -> PolarCaps | None:
@@ -71,6 +81,54 @@ def polar_caps(pf_width: int, pano_width: int, density: float, from_deg: float) 
     cap = row_latitudes(width // 2).abs()
     first = float(cap[cap > last + step / 2 - cap_step / 2].min())         # the caps' first row centre
     return PolarCaps(math.degrees(0.5 * (last + first)), width, float(density * pf_width))
+
+
+def called_for(caps: PolarCaps, cap_rgb: torch.Tensor, pf_width: int, ratio: float) -> tuple[PolarCaps | None, dict]:
+    """The caps a panorama calls for: a cap stays on when what thinning its rows to P_f's points takes
+    away (``ring_detail``, area-weighted mean over the cap's rows of the caps' grid cap_rgb [h, w, C])
+    exceeds ``ratio`` x the same over the rows between the caps (every 4th; ``ratio`` 0: always on). A smooth
+    ceiling or sky keeps P_f's sampling. Returns (caps with their flags, None when both are off;
+    {"north", "south", "sides"}: the three means)."""
+    lat = row_latitudes(cap_rgb.shape[0])
+    edge = math.radians(caps.split_deg)
+    pick = (lat.abs() > edge) | (torch.arange(len(lat)) % 4 == 0)     # the caps' rows, every 4th between
+    lat = lat[pick]
+    loss = ring_detail(cap_rgb[pick], torch.clamp(torch.round(pf_width * torch.cos(lat)), 1, cap_rgb.shape[1]))
+    weight = torch.cos(lat)
+
+    def mean(rows: torch.Tensor) -> float:
+        return float((loss[rows] * weight[rows]).sum() / weight[rows].sum())
+
+    detail = {"north": mean(lat > edge), "south": mean(lat < -edge), "sides": mean(lat.abs() <= edge)}
+    north, south = (ratio == 0 or detail[k] > ratio * detail["sides"] for k in ("north", "south"))
+    caps = PolarCaps(caps.split_deg, caps.width, caps.ring_points, north, south)
+    return (caps if north or south else None), detail
+
+
+def ring_detail(rgb: torch.Tensor, counts: torch.Tensor) -> torch.Tensor:
+    """[H] float64: mean square (over the row's pixels and channels) of what area sampling takes away
+    from each row of rgb [H, W, C]: the row thinned to counts [H] points (box averages, as
+    ``area_sample``) and interpolated back linearly along the ring, against the row itself."""
+    H, W, C = rgb.shape
+    x = rgb.to(torch.float64)
+    n = counts.long()                                                                  # [H]
+    row = torch.repeat_interleave(torch.arange(H), n)                                  # [N]
+    first = torch.cumsum(n, 0) - n
+    j = torch.arange(int(n.sum())) - first[row]
+    u0, u1 = j * (W / n[row]), (j + 1) * (W / n[row])                                  # [N] pixels
+    prefix = torch.cat([torch.zeros_like(x[:, :1]), torch.cumsum(x, 1)], 1)            # [H, W + 1, C]
+
+    def integral(u: torch.Tensor) -> torch.Tensor:
+        k = torch.clamp(torch.floor(u).long(), 0, W - 1)
+        return prefix[row, k] + (u - k)[:, None] * x[row, k]
+
+    points = (integral(u1) - integral(u0)) / (u1 - u0)[:, None]                        # [N, C]
+    t = (torch.arange(W, dtype=torch.float64) + 0.5) * (n[:, None] / W) - 0.5          # [H, W] in points
+    k0 = torch.floor(t).long()
+    f = (t - k0)[..., None]
+    a = points[first[:, None] + torch.remainder(k0, n[:, None])]
+    b = points[first[:, None] + torch.remainder(k0 + 1, n[:, None])]
+    return ((a + (b - a) * f - x) ** 2).mean((1, 2))
 
 
 def row_latitudes(height: int) -> torch.Tensor:
@@ -127,12 +185,12 @@ def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, caps:
     else:
         if cap_rgb is None or tuple(cap_rgb.shape[:2]) != (caps.width // 2, caps.width):
             raise ValueError(f"equirect_to_area_points: cap_rgb must be {caps.width // 2} x {caps.width}")
-        edge = math.radians(caps.split_deg)
         lat, cap_lat = row_latitudes(rgb.shape[0]), row_latitudes(cap_rgb.shape[0])
         ring = torch.clamp(torch.round(caps.ring_points * torch.cos(cap_lat)), 1, caps.width).long()
-        parts = [area_sample(cap_rgb, radial_depth, ring, cap_lat > edge),
-                 area_sample(rgb, radial_depth, rows=lat.abs() < edge),
-                 area_sample(cap_rgb, radial_depth, ring, cap_lat < -edge)]
+        cap_rows = caps.holds(cap_lat)
+        parts = [area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat > 0)),
+                 area_sample(rgb, radial_depth, rows=~caps.holds(lat)),
+                 area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat < 0))]
     dirs, colour, depth = (torch.cat(x) for x in zip(*parts))
     valid = torch.isfinite(depth) & (depth > 0)
     return dirs[valid] * depth[valid][:, None], colour[valid]
@@ -155,7 +213,7 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
     in_cap = torch.zeros_like(layer)
     if caps is not None:
         lat = torch.asin((-d[:, 1]).clamp(-1.0, 1.0))
-        in_cap = (lat.abs() > math.radians(caps.split_deg)) & ~layer
+        in_cap = caps.holds(lat) & ~layer
         across = torch.where(in_cap, caps.row_rad, across)
         along = torch.where(in_cap, caps.ring_rad(lat).to(r.dtype), across)
     scales = torch.stack([width * r * along, width * r * across, thickness * r * across], -1)

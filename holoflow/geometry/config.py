@@ -30,6 +30,10 @@ class PointCloudParams(StageParams):
                                     "(holoflow/geometry/area.py); 1 = none", ge=1, le=4)
     pf_polar_from_deg: float = param(65.0, "pf_polar_density: the caps' edge, latitude north and south", "deg",
                                      ge=0, le=90)
+    pf_polar_detail: float = param(1.0, "pf_polar_density: a cap is sampled finer only where thinning its rows to "
+                                   "P_f's points would take away more than this many times what it takes at the "
+                                   "sides (area-weighted mean square, holoflow/geometry/area.py called_for): a plain "
+                                   "ceiling or sky keeps P_f's sampling; 0 = always", ge=0)
     view_size: int = param(512, "pf_width 0: the view size P_f must stay sharp at (paper 512)", "px", ge=1)
     view_fov_deg: float = param(47.43, "pf_width 0: that view's field of view (paper 47.43)", "deg", gt=0,
                                 lt=180)

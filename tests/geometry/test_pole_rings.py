@@ -160,3 +160,23 @@ def test_cap_ellipses_are_narrow_along_the_ring():
     torch.testing.assert_close(scales[:2, 0], 0.6 * 3.0 * caps.ring_rad(lat[:2]))
     torch.testing.assert_close(scales[:2, 1], torch.full((2,), 0.6 * 3.0 * caps.row_rad, dtype=torch.float64))
     torch.testing.assert_close(scales[2], torch.tensor([0.6, 0.6, 0.1], dtype=torch.float64) * 3 * 2 * math.pi / 512)
+
+
+def test_caps_only_where_the_poles_hold_detail():
+    """A cap stays on where thinning its rows to P_f's points loses more than at the sides: fine
+    ring detail in the north cap turns it on, a smooth south pole (a plain floor, a sky) keeps P_f's
+    sampling; ratio 0 keeps both."""
+    from holoflow.geometry.area import called_for, ring_detail
+
+    width = 512
+    pano = _ring_texture(width)                                   # 24 cycles a ring, everywhere
+    lat = math.pi / 2 - (torch.arange(width // 2) + 0.5) * math.pi / (width // 2)
+    pano[lat < 0] = 0.4                                           # the southern half plain
+    caps = polar_caps(width // 2, width, 2.0, 65.0)
+    on, detail = called_for(caps, pano, width // 2, 1.0)
+    assert on.north and not on.south and detail["south"] < 1e-20 and detail["north"] > detail["sides"] > 0
+    both, _ = called_for(caps, pano, width // 2, 0.0)
+    assert both.north and both.south
+    assert called_for(caps, torch.full((width // 2, width, 3), 0.4, dtype=torch.float64), width // 2, 1.0)[0] is None
+    # thinning to all the row's pixels loses nothing
+    assert float(ring_detail(pano, torch.full((width // 2,), width)).abs().max()) < 1e-20
