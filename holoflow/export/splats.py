@@ -227,8 +227,8 @@ def _smallest_three_playcanvas(quats_wxyz: np.ndarray) -> np.ndarray:
     q = quats_wxyz
     largest = np.argmax(np.abs(q), axis=1)
     q = q * np.where(q[np.arange(len(q)), largest] < 0, -1.0, 1.0)[:, None]
-    others = np.array([[j for j in range(4) if j != i] for i in range(4)])[largest]   # [N, 3]
-    rest = np.take_along_axis(q, others, 1)
+    # the three others in order: column k is q[:, k] before the largest, q[:, k + 1] from it on
+    rest = np.stack([np.where(largest > k, q[:, k], q[:, k + 1]) for k in range(3)], 1)     # [N, 3]
     v = np.round(np.clip(rest * np.sqrt(0.5) + 0.5, 0, 1) * 1023).astype(np.uint32)
     return (largest.astype(np.uint32) << 30) | (v[:, 0] << 20) | (v[:, 1] << 10) | v[:, 2]
 

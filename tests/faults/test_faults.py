@@ -130,8 +130,10 @@ def test_step_out_of_memory(reference, tmp_path):
     as a memory-capped container would): its next allocation fails, the run says so in one line."""
     # The limit lands wherever the step happens to be when the test catches it: a step caught after its
     # last allocation (a busy machine slows the catch) finishes fine, so that try says nothing and the
-    # next one starts from a fresh copy of the store.
-    for attempt in range(4):
+    # next one starts from a fresh copy of the store. Native code may also crash on a failed allocation
+    # instead of raising MemoryError (numpy's take_along_axis did, in export's packing: SIGSEGV, which
+    # the runner reports as "killed by signal 11"); that try says nothing about the runner either.
+    for attempt in range(6):
         store = without_tail(reference[0], tmp_path / f"store{attempt}")
         proc = popen(store)
         step = wait_for_step(proc, TAIL)
@@ -140,7 +142,7 @@ def test_step_out_of_memory(reference, tmp_path):
         resource.prlimit(step, resource.RLIMIT_AS, (vm + (1 << 20), vm + (1 << 20)))
         os.kill(step, signal.SIGCONT)
         out, err = proc.communicate(timeout=120)
-        if proc.returncode != 0:
+        if proc.returncode != 0 and "killed by signal" not in err:
             break
     assert proc.returncode == 1, err
     line = one_clear_line(err, f"stage '{TAIL}' failed", "out of memory")
