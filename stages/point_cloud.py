@@ -94,8 +94,8 @@ def main() -> int:
     print(f"point_cloud: {counts}, shell radius {shell:.3f} m, sky {100 * sky_fraction:.2f}%")
     if polar_detail is not None:
         on = [k for k in ("north", "south") if pf_caps is not None and getattr(pf_caps, k)]
-        print(f"point_cloud: polar caps {' and '.join(on) or 'off'} (what P_f's rings would lose: "
-              f"north {polar_detail['north']:.3g}, south {polar_detail['south']:.3g}, sides {polar_detail['sides']:.3g})")
+        lost = ", ".join(f"{k} {polar_detail[k]:.3g}" for k in ("north", "south", "sides"))
+        print(f"point_cloud: polar caps {' and '.join(on) or 'off'} (what P_f's rings would lose: {lost})")
     return 0
 
 

@@ -107,28 +107,38 @@ def called_for(caps: PolarCaps, cap_rgb: torch.Tensor, pf_width: int, ratio: flo
 
 def ring_detail(rgb: torch.Tensor, counts: torch.Tensor) -> torch.Tensor:
     """[H] float64: mean square (over the row's pixels and channels) of what area sampling takes away
-    from each row of rgb [H, W, C]: the row thinned to counts [H] points (box averages, as
-    ``area_sample``) and interpolated back linearly along the ring, against the row itself."""
-    H, W, C = rgb.shape
-    x = rgb.to(torch.float64)
-    n = counts.long()                                                                  # [H]
-    row = torch.repeat_interleave(torch.arange(H), n)                                  # [N]
+    from each row of rgb [H, W, C]: the row thinned to counts [H] points (``ring_boxes``) and
+    interpolated back linearly along the ring, against the row itself."""
+    H, W, _ = rgb.shape
+    n = counts.long().to(rgb.device)                                                   # [H]
+    _, _, points = ring_boxes(rgb.to(torch.float64), n)                                # [N, C]
     first = torch.cumsum(n, 0) - n
-    j = torch.arange(int(n.sum())) - first[row]
-    u0, u1 = j * (W / n[row]), (j + 1) * (W / n[row])                                  # [N] pixels
-    prefix = torch.cat([torch.zeros_like(x[:, :1]), torch.cumsum(x, 1)], 1)            # [H, W + 1, C]
-
-    def integral(u: torch.Tensor) -> torch.Tensor:
-        k = torch.clamp(torch.floor(u).long(), 0, W - 1)
-        return prefix[row, k] + (u - k)[:, None] * x[row, k]
-
-    points = (integral(u1) - integral(u0)) / (u1 - u0)[:, None]                        # [N, C]
-    t = (torch.arange(W, dtype=torch.float64) + 0.5) * (n[:, None] / W) - 0.5          # [H, W] in points
+    t = (torch.arange(W, dtype=torch.float64, device=rgb.device) + 0.5) * (n[:, None] / W) - 0.5   # [H, W]
     k0 = torch.floor(t).long()
     f = (t - k0)[..., None]
     a = points[first[:, None] + torch.remainder(k0, n[:, None])]
     b = points[first[:, None] + torch.remainder(k0 + 1, n[:, None])]
-    return ((a + (b - a) * f - x) ** 2).mean((1, 2))
+    return ((a + (b - a) * f - rgb.to(torch.float64)) ** 2).mean((1, 2))
+
+
+def ring_boxes(rgb: torch.Tensor, counts: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Each row of rgb [H, W, C] cut into counts [H] equal longitude intervals from -pi: the row of each
+    interval [N], its centre [N] (pixels, float64) and the exact box average of the row over it [N, C]
+    (rgb's dtype; the row taken as constant over each pixel), rows top to bottom."""
+    H, W = rgb.shape[:2]
+    row = torch.repeat_interleave(torch.arange(H, device=rgb.device), counts)          # [N]
+    first = torch.cumsum(counts, 0) - counts
+    j = torch.arange(int(counts.sum()), device=rgb.device) - first[row]                # index within the row
+    n = counts[row].to(torch.float64)
+    u0, u1 = j * (W / n), (j + 1) * (W / n)                                            # [N] interval, pixels
+    prefix = torch.cat([torch.zeros_like(rgb[:, :1]), torch.cumsum(rgb.to(torch.float64), 1)], 1)  # [H, W + 1, C]
+
+    def integral(u: torch.Tensor) -> torch.Tensor:                                     # row sum over [0, u)
+        k = torch.clamp(torch.floor(u).long(), 0, W - 1)
+        return prefix[row, k] + (u - k)[:, None] * rgb[row, k].to(torch.float64)
+
+    colour = ((integral(u1) - integral(u0)) / (u1 - u0)[:, None]).to(rgb.dtype)      # [N, C]
+    return row, 0.5 * (u0 + u1), colour
 
 
 def row_latitudes(height: int) -> torch.Tensor:
@@ -153,19 +163,7 @@ def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, counts: torch.Ten
     counts = (area_counts(H, W) if counts is None else counts).to(rgb.device)          # [H]
     if rows is not None:
         counts = torch.where(rows.to(rgb.device), counts, torch.zeros_like(counts))
-    row = torch.repeat_interleave(torch.arange(H, device=rgb.device), counts)          # [N]
-    first = torch.cumsum(counts, 0) - counts
-    j = torch.arange(int(counts.sum()), device=rgb.device) - first[row]                # index within the row
-    n = counts[row].to(torch.float64)
-    u0, u1 = j * (W / n), (j + 1) * (W / n)                                            # [N] interval, pixels
-    prefix = torch.cat([torch.zeros_like(rgb[:, :1]), torch.cumsum(rgb.to(torch.float64), 1)], 1)  # [H, W + 1, C]
-
-    def integral(u: torch.Tensor) -> torch.Tensor:                                     # row sum over [0, u)
-        k = torch.clamp(torch.floor(u).long(), 0, W - 1)
-        return prefix[row, k] + (u - k)[:, None] * rgb[row, k].to(torch.float64)
-
-    colour = ((integral(u1) - integral(u0)) / (u1 - u0)[:, None]).to(rgb.dtype)      # [N, C]
-    centre = 0.5 * (u0 + u1)                                                           # [N] pixels
+    row, centre, colour = ring_boxes(rgb, counts)                                      # [N], [N], [N, C]
     lat = row_latitudes(H).to(rgb.device)[row]
     drow = row if Hd == H else torch.floor((row + 0.5) * (Hd / H)).long()
     dcol = torch.floor(centre if Wd == W else centre * (Wd / W)).long()
