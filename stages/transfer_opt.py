@@ -15,7 +15,7 @@ def main() -> int:
     job.torch_threads(1)          # small tensors here; the numba kernels use job.cpus threads
     from holoflow.io.ply import read_points
     from holoflow.io.exr import read_rgb
-    from holoflow.recon.colour_fit import fit_colours, viewing_views
+    from holoflow.recon.colour_fit import fit_colours, polar_weights, viewing_views
     from holoflow.recon.config import TransferOptParams
     from holoflow.recon.preview import write_previews
     from holoflow.recon.schedule import cloud_footprint, save_result, transfer_optimize
@@ -34,8 +34,10 @@ def main() -> int:
         job.torch_threads(job.cpus)   # the fit's views and residuals are large tensors
         pano = torch.from_numpy(read_rgb(job.input_file("detail", "pano.exr"))).permute(2, 0, 1)   # [3, H, W]
         t0 = time.perf_counter()
-        log["colour_fit"] = fit_colours(model, viewing_views(pano, cams, cfg.fit_size), cfg.fit_iters,
-                                        job.engine, cfg.fit_relax, progress=job.progress)
+        views = viewing_views(pano, cams, cfg.fit_size)
+        log["colour_fit"] = fit_colours(model, views, cfg.fit_iters, job.engine, cfg.fit_relax, progress=job.progress,
+                                        weights=polar_weights(views, cfg.fit_polar_weight),
+                                        max_colour=cfg.fit_max_colour)
         log["seconds"]["colour_fit"] = round(time.perf_counter() - t0, 3)
         job.torch_threads(1)
     save_result(job, model, log, pano_views, "scene.ply")         # G1, its fit and train_log.json

@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from holoflow.geometry.camera import elevation_deg, polar_views
+
 PAPER_FOV_DEG = 47.43       # focal 582.69 px at 512 px (LucidDreamer / HoloDreamer)
 
 
@@ -68,18 +70,6 @@ def view_intrinsics(size: int, fov_deg: float) -> torch.Tensor:
     from holoflow.geometry.camera import intrinsics_from_fov
 
     return intrinsics_from_fov(fov_deg, size, size, dtype=torch.float32)
-
-
-def polar_cameras(viewmats: torch.Tensor, pole_deg: float) -> torch.Tensor:
-    """[C] bool: the camera's view axis (world, the viewmat's third row) lies within ``pole_deg``
-    degrees of the zenith (-y) or the nadir (+y)."""
-    return elevation_deg(viewmats).abs() >= 90.0 - pole_deg
-
-
-def elevation_deg(viewmats: torch.Tensor) -> torch.Tensor:
-    """[C] degrees of each camera's view axis above the horizon (+90 = zenith; world +y is down)."""
-    axis = viewmats[:, 2, :3].double()
-    return torch.rad2deg(torch.asin((-axis[:, 1] / axis.norm(dim=1)).clamp(-1, 1)))
 
 
 def source_views(pano: torch.Tensor, viewmats: torch.Tensor, K: torch.Tensor, size: int,
@@ -315,7 +305,7 @@ def score_run(run_dir: Path, run_info: dict, spec: ViewingSpec = ViewingSpec(),
     model = GaussianModel.load_ply(run_dir / model_file)
     K = view_intrinsics(spec.size, spec.fov_deg)
     vm = base_camera_viewmats(run_dir)
-    polar = polar_cameras(vm, spec.pole_deg)
+    polar = polar_views(vm, spec.pole_deg)
     src = run_source(run_dir, run_info)
     sources = source_views(src.pano, vm, K, spec.size, spec.supersample)
     t["source_views"] = time.monotonic() - t0

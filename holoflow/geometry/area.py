@@ -195,14 +195,15 @@ def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, caps:
 
 
 def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.6, thickness: float = 0.1,
-                        caps: PolarCaps | None = None, layer_points: int = 0, layer_spacing_rad: float = 0.0
-                        ) -> tuple[torch.Tensor, torch.Tensor]:
+                        caps: PolarCaps | None = None, layer_points: int = 0, layer_spacing_rad: float = 0.0,
+                        polar_width: float | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Scales [N, 3] (metres) and quaternions [N, 4] (w, x, y, z) of Gaussians at points xyz [N, 3]
     sampled from the panorama centre (the origin) with angular spacing ``spacing_rad``: standard
     deviation ``width`` x r spacing along the tangent axes, ``thickness`` x r spacing along the ray
     (local z turned onto the ray). r is clamped away from 0. Points in the ``caps`` use the caps'
-    spacings instead: caps.ring_rad along the ring (local x turned east), caps.row_rad across it; the
-    last ``layer_points`` points (P_f's background layer, a sparser grid) ``layer_spacing_rad``."""
+    spacings instead: caps.ring_rad along the ring (local x turned east), caps.row_rad across it, and
+    ``polar_width`` (None: ``width``) along both; the last ``layer_points`` points (P_f's background
+    layer, a sparser grid) ``layer_spacing_rad``."""
     r = torch.linalg.vector_norm(xyz, dim=-1).clamp_min(1e-9)                   # [N]
     d = xyz / r[:, None]
     layer = torch.arange(len(r), device=r.device) >= len(r) - layer_points
@@ -214,7 +215,8 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
         in_cap = caps.holds(lat) & ~layer
         across = torch.where(in_cap, caps.row_rad, across)
         along = torch.where(in_cap, caps.ring_rad(lat).to(r.dtype), across)
-    scales = torch.stack([width * r * along, width * r * across, thickness * r * across], -1)
+    tangent = torch.where(in_cap, width if polar_width is None else polar_width, width).to(r.dtype)
+    scales = torch.stack([tangent * r * along, tangent * r * across, thickness * r * across], -1)
     # the shortest rotation taking +z to d: q = (1 + d_z, -d_y, d_x, 0), normalised; d = -z: 180 deg about x
     q = torch.stack([1 + d[:, 2], -d[:, 1], d[:, 0], torch.zeros_like(r)], -1)
     flip = (1 + d[:, 2]) < 1e-9

@@ -76,6 +76,18 @@ def camera_centers(viewmat: torch.Tensor) -> torch.Tensor:
     return -(R.transpose(-1, -2) @ t.unsqueeze(-1)).squeeze(-1)
 
 
+def elevation_deg(viewmats: torch.Tensor) -> torch.Tensor:
+    """[C] degrees of each camera's view axis (world, the viewmat's third row; viewmats [C, 4, 4])
+    above the horizon: +90 = zenith (world +y is down), float64."""
+    axis = viewmats[:, 2, :3].double()
+    return torch.rad2deg(torch.asin((-axis[:, 1] / axis.norm(dim=1)).clamp(-1, 1)))
+
+
+def polar_views(viewmats: torch.Tensor, pole_deg: float) -> torch.Tensor:
+    """[C] bool: the camera's view axis lies within ``pole_deg`` degrees of the zenith or the nadir."""
+    return elevation_deg(viewmats).abs() >= 90.0 - pole_deg
+
+
 def invert_viewmat(viewmat: torch.Tensor) -> torch.Tensor:
     """Rigid inverse [..., 4, 4] (world-to-camera <-> camera-to-world)."""
     R, t = viewmat[..., :3, :3], viewmat[..., :3, 3]

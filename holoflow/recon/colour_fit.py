@@ -11,10 +11,13 @@ so the colours that best reproduce the panorama's views are a linear least-squar
 solved by projected SART (simultaneous algebraic reconstruction): each iteration renders every
 view once, back-projects the residual and moves each colour by its weight-normalised mean residual
 
-    c_i <- clip(c_i - relax * sum_vp w_iv(p) (I_v(p) - target_v(p)) / sum_vp w_iv(p), 0, 1),
+    c_i <- clip(c_i - relax * sum_vp u_v w_iv(p) (I_v(p) - target_v(p)) / sum_vp u_v w_iv(p), 0, c_max),
 
-a Jacobi step on the normal equations that converges for 0 < relax < 2 since every pixel's weights
-sum to its alpha <= 1. Numerator and denominator come from one backward pass: the render carries a
+a Jacobi step on the normal equations of the view-weighted (u_v) least squares that converges for
+0 < relax < 2 since every pixel's weights sum to its alpha <= 1. The views near the zenith and nadir
+weigh more (``polar_weights``): they see the polar caps' Gaussians head on, and the many side views
+that see the same Gaussians obliquely at their edges would otherwise outvote them. c_max above 1 lets
+a Gaussian make up for coverage below 1 next to a white highlight (the renderer clamps at 0 only). Numerator and denominator come from one backward pass: the render carries a
 fourth colour channel of ones, whose gradient is sum_vp w_iv(p). Only the view-independent (DC) colour
 moves; higher SH bands, positions, shapes and opacities stay as trained. Gaussians no view sees
 (denominator below ``min_weight`` pixels) keep their colour. Colours and targets are sRGB in [0, 1],
@@ -53,11 +56,24 @@ def viewing_views(pano: torch.Tensor, cams: dict, size: int) -> list[dict]:
     return out
 
 
+def polar_weights(views: list[dict], weight: float, pole_deg: float = 25.0) -> list[float]:
+    """Per view: ``weight`` for a view whose axis lies within ``pole_deg`` of the zenith or nadir, else 1."""
+    from holoflow.geometry.camera import polar_views
+
+    if not views:
+        return []
+    polar = polar_views(torch.stack([v["viewmat"] for v in views]), pole_deg)
+    return [float(weight) if bool(p) else 1.0 for p in polar]
+
+
 def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu", relax: float = 1.0,
-                min_weight: float = 0.05, chunk: int = 8, progress: Progress = None) -> dict:
+                min_weight: float = 0.05, chunk: int = 8, progress: Progress = None,
+                weights: list[float] | None = None, max_colour: float = 1.0) -> dict:
     """Projected SART on ``model``'s DC colours (module docstring), in place: ``iterations`` passes
-    over ``views`` (one image size; image sRGB [H, W, 3], viewmat [4, 4], K [3, 3]). Returns the log:
-    PSNR (dB, all pixels of all views) before each pass and the number of Gaussians the views see."""
+    over ``views`` (one image size; image sRGB [H, W, 3], viewmat [4, 4], K [3, 3]), each view's
+    pixels weighted by ``weights`` (None: all 1), colours kept in [0, ``max_colour``]. Returns the log:
+    PSNR (dB, all pixels of all views, unweighted) before each pass and the number of Gaussians the
+    views see."""
     from holoflow.splat import rasterize
     from holoflow.splat.project import SH_C0
     from holoflow.splat.rasterize import camera_colors
@@ -69,6 +85,9 @@ def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu",
     means, quats = model.means.detach(), model.quats.detach()
     scales, opac = torch.exp(model.log_scales.detach()), torch.sigmoid(model.opacity_logits.detach())
     view_dependent = model.sh_degree > 0
+    weights = [1.0] * len(views) if weights is None else [float(x) for x in weights]
+    if len(weights) != len(views) or min(weights) < 0:
+        raise ValueError(f"fit_colours: {len(views)} views need as many weights >= 0, got {weights}")
     psnr, seen = [], 0
 
     def one_pass() -> tuple[torch.Tensor, torch.Tensor, float]:
@@ -85,7 +104,8 @@ def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu",
             out = rasterize(means, quats, scales, opac, feats, vm, K, w, h, backend=backend, depth=False)
             target = torch.stack([v["image"] for v in part]).to(dev)
             resid = (out["rgb"][..., :3] - target).detach()                 # [c, H, W, 3]
-            loss = (out["rgb"][..., :3] * resid).sum() + out["rgb"][..., 3].sum()
+            u = torch.tensor(weights[s:s + step], device=dev, dtype=resid.dtype)[:, None, None]   # [c, 1, 1]
+            loss = (out["rgb"][..., :3] * (resid * u[..., None])).sum() + (out["rgb"][..., 3] * u).sum()
             g, = torch.autograd.grad(loss, feats)                            # [N, 4]
             num += g[:, :3].double()
             den += g[:, 3].double()
@@ -101,9 +121,10 @@ def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu",
             seen = int(ok.sum())
             step = torch.where(ok[:, None], num / den.clamp_min(min_weight)[:, None], torch.zeros_like(num))
             base = SH_C0 * model.sh_dc[:, 0, :].double() + 0.5                  # the DC colour, sRGB
-            new = torch.where(ok[:, None], (base - relax * step).clamp(0.0, 1.0), base)
+            new = torch.where(ok[:, None], (base - relax * step).clamp(0.0, max_colour), base)
             model.sh_dc[:, 0, :] = ((new - 0.5) / SH_C0).to(model.sh_dc.dtype)
         if progress is not None:
             progress(it + 1, iterations, "colour fit")
     return {"iterations": iterations, "size": [w, h], "views": len(views), "relax": relax,
+            "weights": sorted(set(weights)), "max_colour": max_colour,
             "psnr_before_pass": [round(p, 4) for p in psnr], "seen_gaussians": seen}

@@ -28,6 +28,12 @@ class OptimParams(StageParams):
                                    "softer, BRISQUE 1.37-1.47x the photos'; 0.65: 1.14-1.23x, +0.4 dB; 0.6: "
                                    "speckle on the street photo, 0.42 % empty at 0.5 m)",
                                    "fraction of the point's footprint", gt=0)
+    footprint_polar_width: float = param(0.55, "init_scale footprint: the polar caps' standard deviation "
+                                         "along the surface (their own, finer spacing, holoflow/geometry/"
+                                         "area.py); below footprint_width since the rasterizer's 0.3 px^2 "
+                                         "low-pass widens their smaller discs more (evl_room_B preview: "
+                                         "0.65: zenith/nadir gap 2.29 dB, 0.55: 1.54, 0.45: 2.1)",
+                                         "fraction of the caps' spacing", gt=0)
     footprint_thickness: float = param(0.1, "init_scale footprint: standard deviation along the ray",
                                        "fraction of the point's footprint", gt=0)
     densify_every: int = param(50, "split / clone every this many iterations (paper: 100)", "iters", ge=1)
@@ -74,6 +80,13 @@ class TransferOptParams(OptimParams):
     fit_iters: int = param(1, "colour fit passes over the base cameras at fit_size (0 = none, the paper); "
                            "each is one render and one backward of every base view", "passes", ge=0)
     fit_relax: float = param(1.0, "colour fit step: 1 = the full weight-normalised residual (SART)", gt=0, lt=2)
+    fit_polar_weight: float = param(8.0, "colour fit: weight of the base views within 25 deg of the zenith or "
+                                    "nadir, which see the polar caps head on, against 1 for the others "
+                                    "(evl_room_B preview: 1: zenith/nadir gap 1.54 dB, 4: 1.14, 8: 1.04, "
+                                    "side views -0.1 dB)", ge=0)
+    fit_max_colour: float = param(1.5, "colour fit: upper bound of a fitted colour (sRGB; the renderer "
+                                  "clamps at 0 only, as 3DGS): above 1 a Gaussian can make up for coverage "
+                                  "below 1 next to a white highlight; 8-bit formats (.splat) clip it", gt=0)
 
 
 @dataclass(frozen=True)

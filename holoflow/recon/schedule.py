@@ -32,8 +32,8 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str 
     rgb [N, 3] uint8 (sRGB), with
     initial ``opacity`` (a stage's ``init_opacity``; 3DGS: 0.1; a surface point cloud tolerates more,
     which shortens training), on ``device``. ``footprint`` = (angular spacing of the cloud in
-    radians, width, thickness[, polar caps, layer points, layer spacing]): each Gaussian covers its
-    point's pixel (holoflow.geometry.area.footprint_gaussians); None: the 3DGS nearest-neighbour size."""
+    radians, width, thickness[, polar caps, layer points, layer spacing, polar width]): each Gaussian
+    covers its point's pixel (holoflow.geometry.area.footprint_gaussians); None: the 3DGS nearest-neighbour size."""
     from holoflow.splat import GaussianModel
 
     if len(xyz) == 0:
@@ -53,7 +53,7 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str 
 def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
     """``init_model``'s footprint for the P_f of a point_cloud output folder: (its pf.json's angular
     spacing, cfg.footprint_width, cfg.footprint_thickness, its polar caps or None, its background
-    layer's point count and spacing), or None with ``init_scale: knn`` or no pf.json (a cloud of the
+    layer's point count and spacing, cfg.footprint_polar_width), or None with ``init_scale: knn`` or no pf.json (a cloud of the
     user's own)."""
     import json
     from pathlib import Path
@@ -67,7 +67,7 @@ def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
     caps = PolarCaps(**pf["polar_caps"]) if "polar_caps" in pf else None
     layer = pf.get("layer", {"points": 0, "spacing_rad": 0.0})
     return (float(pf["spacing_rad"]), cfg.footprint_width, cfg.footprint_thickness, caps, int(layer["points"]),
-            float(layer["spacing_rad"]))
+            float(layer["spacing_rad"]), cfg.footprint_polar_width)
 
 
 def panorama_extent(xyz: np.ndarray) -> float:

@@ -37,7 +37,7 @@ def test_polar_split_picks_the_cameras_near_the_zenith_and_nadir():
     from holoflow.geometry.rigs import base_rig
 
     vm = base_rig(38)
-    polar = viewing.polar_cameras(vm, 25.0)
+    polar = viewing.polar_views(vm, 25.0)
     axis = vm[:, 2, :3].double()
     angle = torch.rad2deg(torch.acos(axis[:, 1].abs().clamp(max=1)))       # degrees to the nearer pole
     assert torch.equal(polar, angle <= 25.0)
@@ -48,7 +48,7 @@ def test_polar_split_picks_the_cameras_near_the_zenith_and_nadir():
 
 def test_exact_reproduction_scores_infinite_and_blur_scores_lower():
     src = viewing.source_views(smooth_pano(), *_cams(), 48)
-    polar = viewing.polar_cameras(_cams()[0], 25.0)
+    polar = viewing.polar_views(_cams()[0], 25.0)
     same = viewing.base_scores(src, src, polar)
     assert same["psnr"] == math.inf and same["ssim"] == pytest.approx(1.0)
     blurred = torch.nn.functional.avg_pool2d(src.permute(0, 3, 1, 2), 5, 1, 2, count_include_pad=False)
@@ -63,7 +63,7 @@ def test_a_scene_of_the_source_beats_a_scene_of_its_blurred_copy():
     pano = smooth_pano(96, 192, cells=24)
     vm, K = _cams(32)
     src = viewing.source_views(pano, vm, K, 32)
-    polar = viewing.polar_cameras(vm, 25.0)
+    polar = viewing.polar_views(vm, 25.0)
     sharp = viewing.base_scores(viewing.render_at(pano_model(pano), vm, K, 32)[0], src, polar)
     soft = torch.nn.functional.avg_pool2d(pano[None], 9, 1, 4, count_include_pad=False)[0]
     blur = viewing.base_scores(viewing.render_at(pano_model(soft), vm, K, 32)[0], src, polar)
