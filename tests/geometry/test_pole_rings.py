@@ -32,7 +32,8 @@ def _room(width: int, sampling: str, cfg: TransferOptParams, pc: PointCloudParam
         xyz, c = equirect_to_area_points(rgb, depth, caps, cap_rgb)
     else:
         xyz, c = equirect_to_points(rgb, depth)
-    footprint = (2 * math.pi / width, cfg.footprint_width, cfg.footprint_thickness, caps)
+    footprint = (2 * math.pi / width, cfg.footprint_width, cfg.footprint_thickness, caps, 0, 0.0,
+                 cfg.footprint_polar_width)                                  # as recon.schedule.cloud_footprint
     return init_model(xyz.numpy(), (c.numpy() * 255 + 0.5).astype(np.uint8), cfg.init_opacity,
                       footprint=footprint if cfg.init_scale == "footprint" else None)
 
@@ -48,17 +49,28 @@ def _poles(model, size: int = 512, side: bool = False):
 
 
 def test_zenith_and_nadir_have_no_rings():
-    """The poles are covered as well as the horizon, in the right colour. The untrained discs of the
-    default width leave the same thin seams everywhere (alpha 0.968 with width 0.65); rings are gaps
-    only the poles have (the control below: alpha < 0.5)."""
+    """The poles are covered, in the right colour. Untrained, the caps' narrower discs leave thin seams
+    (worst pixel alpha 0.906-0.914 in the views that see a cap with footprint_polar_width 0.55; P_f's
+    0.65 discs 0.974) but no rings,
+    gaps that only the poles have (the control below: alpha < 0.5); after transfer_opt's colour fit
+    (its defaults, here at 256 px) every view is within 0.045 of the colour."""
+    from holoflow.recon.colour_fit import fit_colours, polar_weights
+
     cfg = TransferOptParams()
     model = _room(512, PointCloudParams().pf_sampling, cfg)
     rgb, alpha = _poles(model, side=True)
     cover = alpha.flatten(1).min(1).values                            # [38] worst pixel per view
-    err = (rgb - torch.tensor(COLOUR)).abs().flatten(1).max(1).values  # [38]
-    assert float(cover[:2].min()) > 0.95 and float(err[:2].max()) < 0.03, (cover, err)
-    assert float(cover[:2].min()) >= float(cover[2:].min()) - 0.005, cover    # no worse than the worst other view
-    assert float(err[:2].max()) <= float(err[2:].max()) + 0.005, err
+    assert float(cover.min()) > 0.9, cover                              # views that see a cap: 0.906-0.914
+    rig = base_rig(38).float()
+    K = intrinsics_from_fov(47.43, 256, 256).float()
+    views = [dict(image=torch.tensor(COLOUR).expand(256, 256, 3), viewmat=v, K=K, mask=None) for v in rig]
+    fit_colours(model, views, cfg.fit_iters, weights=polar_weights(views, cfg.fit_polar_weight),
+                max_colour=cfg.fit_max_colour)
+    rgb, _ = _poles(model, side=True)
+    err = (rgb - torch.tensor(COLOUR)).abs().flatten(1).max(1).values  # [38] worst pixel per view
+    # worst pixel: 0.008 in the views that see P_f only, 0.031-0.043 in those that see a cap (its seams;
+    # a cap is on only where the pole holds detail, geometry.area.called_for, which hides them)
+    assert float(err.max()) < 0.045 and float(err[8:30].max()) < 0.01, err
 
 
 def test_one_point_per_pixel_leaves_rings():
@@ -160,6 +172,10 @@ def test_cap_ellipses_are_narrow_along_the_ring():
     torch.testing.assert_close(scales[:2, 0], 0.6 * 3.0 * caps.ring_rad(lat[:2]))
     torch.testing.assert_close(scales[:2, 1], torch.full((2,), 0.6 * 3.0 * caps.row_rad, dtype=torch.float64))
     torch.testing.assert_close(scales[2], torch.tensor([0.6, 0.6, 0.1], dtype=torch.float64) * 3 * 2 * math.pi / 512)
+    narrow, _ = footprint_gaussians(xyz, 2 * math.pi / 512, 0.6, 0.1, caps, polar_width=0.45)
+    torch.testing.assert_close(narrow[:2, :2], scales[:2, :2] * 0.75)        # the caps' own width, along both
+    torch.testing.assert_close(narrow[:, 2], scales[:, 2])                   # thickness as before
+    torch.testing.assert_close(narrow[2], scales[2])                         # P_f untouched
 
 
 def test_caps_only_where_the_poles_hold_detail():

@@ -42,10 +42,11 @@ def _truth_targets(truth: torch.Tensor, vm, K) -> torch.Tensor:
     return render(m, vm, K.expand(len(vm), 3, 3), SIZE, SIZE, backend="reference", depth=False)["rgb"].detach()
 
 
-def test_one_pass_is_the_dense_sart_step():
+@pytest.mark.parametrize("weights, max_colour", [(None, 1.0), ([1.0, 3.0, 0.5], 1.5)])
+def test_one_pass_is_the_dense_sart_step(weights, max_colour):
     """The fast path's one pass equals the SART step built from the explicit weight matrix: every
     Gaussian's compositing weight at every pixel, from rendering one indicator channel per Gaussian
-    with the dense reference rasterizer."""
+    with the dense reference rasterizer; view weights u_v scale each view's rows of it."""
     m, truth = _model(n=60)
     vm, K = _cameras(3)
     target = torch.rand(3, SIZE, SIZE, 3, generator=torch.Generator().manual_seed(1))
@@ -55,11 +56,13 @@ def test_one_pass_is_the_dense_sart_step():
                   torch.sigmoid(m.opacity_logits.detach()), eye, vm, K.expand(3, 3, 3), SIZE, SIZE,
                   backend="reference", depth=False)["rgb"].reshape(-1, N).double()          # [P, N]
     c = (SH_C0 * m.sh_dc[:, 0, :].detach() + 0.5).double()                                   # [N, 3]
+    u = torch.tensor([1.0] * 3 if weights is None else weights, dtype=torch.float64)
+    u = u.repeat_interleave(SIZE * SIZE)[:, None]                                            # [P, 1]
     resid = W @ c - target.reshape(-1, 3).double()
-    num, den = W.T @ resid, W.sum(0)
+    num, den = (u * W).T @ resid, (u * W).sum(0)
     ok = den > 0.05
-    want = torch.where(ok[:, None], (c - num / den.clamp_min(0.05)[:, None]).clamp(0, 1), c)
-    fit_colours(m, _views(target, vm, K), 1, backend="cpu", chunk=2)
+    want = torch.where(ok[:, None], (c - num / den.clamp_min(0.05)[:, None]).clamp(0, max_colour), c)
+    fit_colours(m, _views(target, vm, K), 1, backend="cpu", chunk=2, weights=weights, max_colour=max_colour)
     got = (SH_C0 * m.sh_dc[:, 0, :].detach() + 0.5).double()
     assert int(ok.sum()) > N // 2
     torch.testing.assert_close(got, want, rtol=0, atol=2e-5)
@@ -106,6 +109,37 @@ def test_unseen_gaussians_keep_their_colour_and_colours_stay_in_range():
     rgb = SH_C0 * m.sh_dc.detach()[:, 0, :] + 0.5
     assert float(rgb.max()) <= 1.0 + 1e-6 and float(rgb.min()) >= -1e-6
     assert float(rgb[~behind].max()) > 0.99
+
+
+def test_a_view_weighted_k_is_the_view_taken_k_times():
+    """Weight 2 on a view moves the colours as that view listed twice does (SART sums over views)."""
+    vm, K = _cameras(3)
+    target = torch.rand(3, SIZE, SIZE, 3, generator=torch.Generator().manual_seed(2))
+    a, _ = _model()
+    b, _ = _model()
+    fit_colours(a, _views(target, vm, K), 2, backend="cpu", weights=[1.0, 2.0, 1.0])
+    fit_colours(b, _views(target[[0, 1, 1, 2]], vm[[0, 1, 1, 2]], K), 2, backend="cpu")
+    torch.testing.assert_close(a.sh_dc.detach(), b.sh_dc.detach(), rtol=0, atol=1e-5)
+    with pytest.raises(ValueError, match="weights"):
+        fit_colours(a, _views(target, vm, K), 1, weights=[1.0, 1.0])
+
+
+def test_colours_may_pass_one_up_to_max_colour():
+    """A target brighter than the Gaussians can reach: colours rise to max_colour and no further."""
+    m, _ = _model()
+    vm, K = _cameras(1)
+    fit_colours(m, _views(torch.ones(1, SIZE, SIZE, 3) * 2.0, vm, K), 3, backend="cpu", max_colour=1.5)
+    rgb = SH_C0 * m.sh_dc.detach()[:, 0, :] + 0.5
+    assert float(rgb.max()) == pytest.approx(1.5, abs=1e-5) and float(rgb.min()) >= -1e-6
+
+
+def test_polar_weights_pick_the_views_near_the_poles():
+    from holoflow.recon.colour_fit import polar_weights
+
+    dirs = [(0, -1, 0.1), (0, 0, 1), (0.3, 1, 0), (1, -0.6, 0)]      # zenith, horizon, nadir-ish, 31 deg up
+    views = [dict(viewmat=look_at((0, 0, 0), d)) for d in dirs]
+    assert polar_weights(views, 8.0) == [8.0, 1.0, 8.0, 1.0]
+    assert polar_weights([], 8.0) == []
 
 
 def test_viewing_views_keep_the_field_of_view():
