@@ -25,7 +25,7 @@ class PointCloudParams(StageParams):
                              "per pixel (the paper)", choices=("area", "grid"))
     pf_polar_density: float = param(2.0, "pf_sampling area: P_f's polar caps (beyond pf_polar_from_deg) are sampled "
                                     "from the panorama on a grid this many times finer than P_f's (rows at most "
-                                    "the panorama's own), with this many times P_f's points along each ring: a "
+                                    "twice the panorama's own), with this many times P_f's points along each ring: a "
                                     "photo's polar rows hold detail a view of the zenith or nadir resolves "
                                     "(holoflow/geometry/area.py); 1 = none", ge=1, le=4)
     pf_polar_from_deg: float = param(65.0, "pf_polar_density: the caps' edge, latitude north and south", "deg",
