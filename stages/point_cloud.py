@@ -30,7 +30,7 @@ def main() -> int:
     import kornia
     import torch
 
-    from holoflow.geometry.area import view_width
+    from holoflow.geometry.area import view_pixel_rad, view_width
     from holoflow.geometry.config import PointCloudParams
     from holoflow.geometry.edges import snap_depth_edges
     from holoflow.geometry.layers import background_layer
@@ -82,7 +82,8 @@ def main() -> int:
         if name == "pf":
             counts["pf_dropped_fraction"] = round(float((~keep).double().mean()), 6)
         job.progress(i + 1, 3, "clouds")
-    pf = {"width": pf_width, "sampling": cfg.pf_sampling, "spacing_rad": 2 * math.pi / pf_width}
+    pf = {"width": pf_width, "sampling": cfg.pf_sampling, "spacing_rad": 2 * math.pi / pf_width,
+          "view_pixel_rad": view_pixel_rad(cfg.view_size, cfg.view_fov_deg)}   # the footprint init's low-pass
     if pf_caps is not None:
         pf["polar_caps"] = pf_caps.to_json()
     if counts.get("pf_layer"):     # the last points of pf.ply, on every layer_stride-th row and column

@@ -200,14 +200,20 @@ def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, caps:
 
 def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.6, thickness: float = 0.1,
                         caps: PolarCaps | None = None, layer_points: int = 0, layer_spacing_rad: float = 0.0,
-                        polar_width: float | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+                        low_pass_rad2: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
     """Scales [N, 3] (metres) and quaternions [N, 4] (w, x, y, z) of Gaussians at points xyz [N, 3]
     sampled from the panorama centre (the origin) with angular spacing ``spacing_rad``: standard
     deviation ``width`` x r spacing along the tangent axes, ``thickness`` x r spacing along the ray
     (local z turned onto the ray). r is clamped away from 0. Points in the ``caps`` use the caps'
-    spacings instead: caps.ring_rad along the ring (local x turned east), caps.row_rad across it, and
-    ``polar_width`` (None: ``width``) along both; the last ``layer_points`` points (P_f's background
-    layer, a sparser grid) ``layer_spacing_rad``."""
+    spacings instead: caps.ring_rad along the ring (local x turned east), caps.row_rad across it; the
+    last ``layer_points`` points (P_f's background layer, a sparser grid) ``layer_spacing_rad``.
+
+    ``low_pass_rad2``: the variance the rasterizer adds to every disc at the viewing size (its 0.3 px^2
+    times a view pixel's angle squared, radians^2 at unit distance). It is taken off each tangent
+    variance, so that ``width`` is the standard deviation a disc is *rendered* with at that size
+    whatever its spacing in pixels: finer grids (the polar caps, a P_f as fine as the view) would
+    otherwise render relatively wider, their neighbours overlapping more, and the front disc's colour
+    would spread further (docs/reconstruction.md, stop 38). Never below half of ``width`` x spacing."""
     r = torch.linalg.vector_norm(xyz, dim=-1).clamp_min(1e-9)                   # [N]
     d = xyz / r[:, None]
     layer = torch.arange(len(r), device=r.device) >= len(r) - layer_points
@@ -219,8 +225,11 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
         in_cap = caps.holds(lat) & ~layer
         across = torch.where(in_cap, caps.row_rad, across)
         along = torch.where(in_cap, caps.ring_rad(lat).to(r.dtype), across)
-    tangent = torch.where(in_cap, width if polar_width is None else polar_width, width).to(r.dtype)
-    scales = torch.stack([tangent * r * along, tangent * r * across, thickness * r * across], -1)
+    def tangent(spacing: torch.Tensor) -> torch.Tensor:                      # [N] std at unit distance
+        nominal = (width * spacing) ** 2
+        return torch.sqrt(torch.clamp(nominal - low_pass_rad2, min=0.25 * nominal))
+
+    scales = torch.stack([r * tangent(along), r * tangent(across), thickness * r * across], -1)
     # the shortest rotation taking +z to d: q = (1 + d_z, -d_y, d_x, 0), normalised; d = -z: 180 deg about x
     q = torch.stack([1 + d[:, 2], -d[:, 1], d[:, 0], torch.zeros_like(r)], -1)
     flip = (1 + d[:, 2]) < 1e-9
@@ -244,6 +253,11 @@ def _turn_east(q: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
     w, x, y, z = q.unbind(-1)
     # q (x) (c, 0, 0, s): the Hamilton product with a turn about local z
     return torch.stack([w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s], -1)
+
+
+def view_pixel_rad(size: int, fov_deg: float) -> float:
+    """Angle (radians) of the centre pixel of a ``size`` px view of horizontal field ``fov_deg``: 1 / focal."""
+    return 2.0 * math.tan(math.radians(fov_deg) / 2) / size
 
 
 def view_width(size: int, fov_deg: float) -> int:

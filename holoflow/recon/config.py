@@ -24,16 +24,12 @@ class OptimParams(StageParams):
                             "the centre, holoflow/geometry/area.py), knn = isotropic, RMS distance to the 3 "
                             "nearest points (3DGS; also used when the cloud has no pf.json)",
                             choices=("footprint", "knn"))
-    footprint_width: float = param(0.65, "init_scale footprint: standard deviation along the surface (0.7: "
-                                   "softer, BRISQUE 1.37-1.47x the photos'; 0.65: 1.14-1.23x, +0.4 dB; 0.6: "
-                                   "speckle on the street photo, 0.42 % empty at 0.5 m)",
+    footprint_width: float = param(0.68, "init_scale footprint: standard deviation along the surface as rendered "
+                                   "at point_cloud's view_size (the rasterizer's 0.3 px^2 low-pass included, "
+                                   "holoflow/geometry/area.py); the preview's P_f (2.5 view px apart): 0.73 "
+                                   "softer, BRISQUE 1.37-1.47x the photos'; 0.68: 1.14-1.23x, +0.4 dB; 0.63: "
+                                   "speckle on the street photo, 0.42 % empty at 0.5 m",
                                    "fraction of the point's footprint", gt=0)
-    footprint_polar_width: float = param(0.55, "init_scale footprint: the polar caps' standard deviation "
-                                         "along the surface (their own, finer spacing, holoflow/geometry/"
-                                         "area.py); below footprint_width since the rasterizer's 0.3 px^2 "
-                                         "low-pass widens their smaller discs more (evl_room_B preview: "
-                                         "0.65: zenith/nadir gap 2.29 dB, 0.55: 1.54, 0.45: 2.1)",
-                                         "fraction of the caps' spacing", gt=0)
     footprint_thickness: float = param(0.1, "init_scale footprint: standard deviation along the ray",
                                        "fraction of the point's footprint", gt=0)
     densify_every: int = param(50, "split / clone every this many iterations (paper: 100)", "iters", ge=1)
