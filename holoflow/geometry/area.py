@@ -225,6 +225,7 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
         in_cap = caps.holds(lat) & ~layer
         across = torch.where(in_cap, caps.row_rad, across)
         along = torch.where(in_cap, caps.ring_rad(lat).to(r.dtype), across)
+
     def tangent(spacing: torch.Tensor) -> torch.Tensor:                      # [N] std at unit distance
         nominal = (width * spacing) ** 2
         return torch.sqrt(torch.clamp(nominal - low_pass_rad2, min=0.25 * nominal))

@@ -16,12 +16,13 @@ view once, back-projects the residual and moves each colour by its weight-normal
 a Jacobi step on the normal equations of the view-weighted (u_v) least squares that converges for
 0 < relax < 2 since every pixel's weights sum to its alpha <= 1. The views near the zenith and nadir
 weigh more (``polar_weights``): they see the polar caps' Gaussians head on, and the many side views
-that see the same Gaussians obliquely at their edges would otherwise outvote them. c_max above 1 lets
-a Gaussian make up for coverage below 1 next to a white highlight (the renderer clamps at 0 only). Numerator and denominator come from one backward pass: the render carries a
-fourth colour channel of ones, whose gradient is sum_vp w_iv(p). Only the view-independent (DC) colour
-moves; higher SH bands, positions, shapes and opacities stay as trained. Gaussians no view sees
-(denominator below ``min_weight`` pixels) keep their colour. Colours and targets are sRGB in [0, 1],
-the training convention.
+that see the same Gaussians obliquely at their edges would otherwise outvote them. Numerator and
+denominator come from one backward pass: the render carries a fourth colour channel of ones, whose
+gradient is sum_vp w_iv(p). Only the view-independent (DC) colour moves; higher SH bands, positions,
+shapes and opacities stay as trained. Gaussians no view sees (denominator below ``min_weight``
+pixels) keep their colour. Targets are sRGB in [0, 1], the training convention; colours may reach
+c_max above 1, so that a Gaussian makes up for coverage below 1 next to a white highlight (the
+renderer clamps at 0 only, as 3DGS).
 """
 from __future__ import annotations
 
