@@ -109,7 +109,7 @@ def pf_area_points(srgb, col, d, cfg):
     from holoflow.geometry.sampling import resize_equirect
 
     pf_width = col.shape[1]
-    caps = polar_caps(pf_width, srgb.shape[1], cfg.pf_polar_density, cfg.pf_polar_from_deg)
+    caps = polar_caps(pf_width, srgb.shape[1], cfg.pf_polar_density, cfg.pf_polar_from_deg, cfg.pf_polar_upsample)
     if caps is None:
         return (*equirect_to_area_points(col, d), None, None)
     cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)   # [h, w, 3]

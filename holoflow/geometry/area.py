@@ -70,14 +70,15 @@ class PolarCaps:
         return ((lat > edge) & self.north) | ((lat < -edge) & self.south)
 
 
-def polar_caps(pf_width: int, pano_width: int, density: float, from_deg: float) -> PolarCaps | None:
+def polar_caps(pf_width: int, pano_width: int, density: float, from_deg: float,
+               upsample: float = 2.0) -> PolarCaps | None:
     """P_f's caps for a ``pf_width`` px P_f of a ``pano_width`` px panorama at ``density`` (1 or
     from_deg >= 90: none): P_f keeps its rows up to ``from_deg``, the caps take over from the first row
-    of a grid min(2 pano_width, density x pf_width) px wide that reaches past P_f's last row's edge,
-    with density x pf_width points a ring at the equator's scale."""
+    of a grid min(upsample x pano_width, density x pf_width) px wide that reaches past P_f's last
+    row's edge, with density x pf_width points a ring at the equator's scale."""
     if density <= 1.0 or from_deg >= 90.0:
         return None
-    width = max(pf_width, min(2 * pano_width, int(math.ceil(density * pf_width))))
+    width = max(pf_width, min(int(upsample * pano_width), int(math.ceil(density * pf_width))))
     width -= width % 2
     lat = row_latitudes(pf_width // 2).abs()
     last = float(lat[lat <= math.radians(from_deg)].max())                  # P_f's last row centre

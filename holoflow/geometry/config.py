@@ -25,9 +25,13 @@ class PointCloudParams(StageParams):
                              "per pixel (the paper)", choices=("area", "grid"))
     pf_polar_density: float = param(2.0, "pf_sampling area: P_f's polar caps (beyond pf_polar_from_deg) are sampled "
                                     "from the panorama on a grid this many times finer than P_f's (rows at most "
-                                    "twice the panorama's own), with this many times P_f's points along each ring: a "
+                                    "pf_polar_upsample x the panorama's own), with this many times P_f's points along each ring: a "
                                     "photo's polar rows hold detail a view of the zenith or nadir resolves "
                                     "(holoflow/geometry/area.py); 1 = none", ge=1, le=4)
+    pf_polar_upsample: float = param(2.0, "pf_polar_density: the caps' grid at most this many times the panorama's "
+                                     "own width; above 1 its rows are the panorama's upsampled bilinearly, which the "
+                                     "discs render closer to the panorama's own views (holoflow/geometry/area.py)",
+                                     ge=1, le=4)
     pf_polar_from_deg: float = param(65.0, "pf_polar_density: the caps' edge, latitude north and south", "deg",
                                      ge=0, le=90)
     pf_polar_detail: float = param(1.0, "pf_polar_density: a cap is sampled finer only where thinning its rows to "
