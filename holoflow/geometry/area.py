@@ -265,5 +265,4 @@ def view_pixel_rad(size: int, fov_deg: float) -> float:
 def view_width(size: int, fov_deg: float) -> int:
     """Equirect width (px) whose pixels are as fine as a ``size`` px view of ``fov_deg`` at its centre:
     360 x (view pixels per degree), e.g. 512 px at 47.43 deg -> 3886."""
-    focal = 0.5 * size / math.tan(math.radians(fov_deg) / 2)
-    return int(math.ceil(2 * math.pi * focal))
+    return int(math.ceil(2 * math.pi / view_pixel_rad(size, fov_deg)))

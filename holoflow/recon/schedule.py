@@ -33,7 +33,8 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str 
     initial ``opacity`` (a stage's ``init_opacity``; 3DGS: 0.1; a surface point cloud tolerates more,
     which shortens training), on ``device``. ``footprint`` = (angular spacing of the cloud in
     radians, width, thickness[, polar caps, layer points, layer spacing, low-pass]): each Gaussian
-    covers its point's pixel (holoflow.geometry.area.footprint_gaussians); None: the 3DGS nearest-neighbour size."""
+    covers its point's pixel (holoflow.geometry.area.footprint_gaussians); None: the 3DGS
+    nearest-neighbour size."""
     from holoflow.splat import GaussianModel
 
     if len(xyz) == 0:
@@ -53,22 +54,21 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str 
 def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
     """``init_model``'s footprint for the P_f of a point_cloud output folder: (its pf.json's angular
     spacing, cfg.footprint_width, cfg.footprint_thickness, its polar caps or None, its background
-    layer's point count and spacing, the rasterizer's low-pass at its viewing size), or None with ``init_scale: knn`` or no pf.json (a cloud of the
-    user's own)."""
+    layer's point count and spacing, the rasterizer's low-pass at its viewing size in radians^2), or
+    None with ``init_scale: knn`` or no pf.json (a cloud of the user's own)."""
     import json
     from pathlib import Path
+
+    from holoflow.geometry.area import PolarCaps
+    from holoflow.splat.project import EPS2D
 
     path = Path(cloud_dir) / "pf.json"
     if cfg.init_scale != "footprint" or not path.is_file():
         return None
-    from holoflow.geometry.area import PolarCaps
-
     pf = json.loads(path.read_text())
     caps = PolarCaps(**pf["polar_caps"]) if "polar_caps" in pf else None
     layer = pf.get("layer", {"points": 0, "spacing_rad": 0.0})
-    from holoflow.splat.project import EPS2D
-
-    low_pass = EPS2D * float(pf.get("view_pixel_rad", 0.0)) ** 2       # radians^2: 0.3 px^2 at the view size
+    low_pass = EPS2D * float(pf.get("view_pixel_rad", 0.0)) ** 2       # 0.3 px^2 at the view size
     return (float(pf["spacing_rad"]), cfg.footprint_width, cfg.footprint_thickness, caps, int(layer["points"]),
             float(layer["spacing_rad"]), low_pass)
 
