@@ -78,44 +78,37 @@ def _dot(a, b):
 
 @njit(parallel=True, cache=True)
 def _project_fwd(means, quats, scales, opac, view, Ks, width, height, near, far, min_opacity,
-                 m2, con, cov, depth, valid, ext, drawn, radii):
-    """Outputs per camera c and Gaussian n: m2 [C, N, 2], depth [C, N], valid [C, N] (near < z < far),
-    drawn [C, N] (valid, opacity >= ``min_opacity`` and the reach meets the image: what the tile
-    culling can keep), radii [C, N] int32 (ceil of the larger reach where drawn, else 0); con [C, N, 3],
-    cov [C, N, 3] and ext [C, N, 2] (reach of alpha >= 1/255, px) where drawn.
+                 m2, con, cov, depth, ext, drawn, radii):
+    """Writes, for the pairs of camera c and Gaussian n that are drawn (near < z < far, opacity >=
+    ``min_opacity`` and the reach meets the image: what the tile culling can keep), and only there:
+    m2 [C, N, 2], depth [C, N], con [C, N, 3], cov [C, N, 3], ext [C, N, 2] (reach of alpha >= 1/255,
+    px), drawn [C, N] (True) and radii [C, N] int32 (ceil of the larger reach). The caller zeroes the
+    outputs: a view of a panorama draws a few % of the pairs, and the others' pages are never touched.
 
-    A Gaussian that is invalid, too transparent, or whose centre lies farther off the image than a
-    cheap bound on its reach is not drawn and skips the covariance math (a view of a panorama draws a
-    few % of them): con and cov are 0 there and ext holds the bound. The bound: the reach along x is
-    k sqrt(r0' Sigma r0 + 0.3) with r0 = fx/z (R0 - u R2) and r0' Sigma r0 <= |r0|^2 tr(Sigma)."""
+    The covariance math is skipped where the centre lies farther off the image than a cheap bound on
+    the reach: along x k sqrt(r0' Sigma r0 + 0.3) with r0 = fx/z (R0 - u R2) and r0' Sigma r0 <=
+    |r0|^2 tr(Sigma)."""
     C = view.shape[0]
     N = means.shape[0]
     for n in prange(N):
+        if not opac[n] >= min_opacity:
+            continue
         kk = math.sqrt(2.0 * math.log(max(opac[n] / ALPHA_MIN, 1.0)))
         tr = scales[n, 0] * scales[n, 0] + scales[n, 1] * scales[n, 1] + scales[n, 2] * scales[n, 2]
         S = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         have_sigma = False
         for c in range(C):
             x, y, z, fx, fy, cx, cy, lim = _camera(view, Ks, c, means, n, width, height)
-            ok = z > near and z < far
-            valid[c, n] = ok
-            if not ok:
-                z = 1.0
-            m2[c, n, 0] = fx * x / z + cx
-            m2[c, n, 1] = fy * y / z + cy
-            depth[c, n] = z
+            if not (z > near and z < far):
+                continue
+            z = float(z)                        # float64 from here, as the backward pass has it
+            mx, my = fx * x / z + cx, fy * y / z + cy
             u = min(max(x / z, lim[0]), lim[1])
             v = min(max(y / z, lim[2]), lim[3])
             r0, r1 = _rows(view, c, fx, fy, z, u, v)
             bx = kk * math.sqrt(_dot(r0, r0) * tr + EPS2D) * 1.0002 + 1e-3    # >= ex below, rounding too
             by = kk * math.sqrt(_dot(r1, r1) * tr + EPS2D) * 1.0002 + 1e-3
-            mx, my = m2[c, n, 0], m2[c, n, 1]       # as stored (the tests below read these)
-            if not (ok and opac[n] >= min_opacity and _meets(mx, my, bx, by, width, height)):
-                drawn[c, n] = False
-                radii[c, n] = 0
-                con[c, n, 0] = con[c, n, 1] = con[c, n, 2] = 0.0
-                cov[c, n, 0] = cov[c, n, 1] = cov[c, n, 2] = 0.0
-                ext[c, n, 0], ext[c, n, 1] = bx, by
+            if not _meets(mx, my, bx, by, width, height):
                 continue
             if not have_sigma:
                 _, _, _, S = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
@@ -125,19 +118,17 @@ def _project_fwd(means, quats, scales, opac, view, Ks, width, height, near, far,
             a = _dot(r0, _symv(S, r0)) + EPS2D
             b = _dot(r0, s1)
             cc = _dot(r1, s1) + EPS2D
-            det = a * cc - b * b
-            con[c, n, 0] = cc / det
-            con[c, n, 1] = -b / det
-            con[c, n, 2] = a / det
-            cov[c, n, 0] = a
-            cov[c, n, 1] = b
-            cov[c, n, 2] = cc
             ex = kk * math.sqrt(a) * 1.0001 + 1e-3
             ey = kk * math.sqrt(cc) * 1.0001 + 1e-3
+            if not _meets(mx, my, ex, ey, width, height):
+                continue
+            det = a * cc - b * b
+            m2[c, n, 0], m2[c, n, 1], depth[c, n] = mx, my, z
+            con[c, n, 0], con[c, n, 1], con[c, n, 2] = cc / det, -b / det, a / det
+            cov[c, n, 0], cov[c, n, 1], cov[c, n, 2] = a, b, cc
             ext[c, n, 0], ext[c, n, 1] = ex, ey
-            hit = _meets(mx, my, ex, ey, width, height)
-            drawn[c, n] = hit
-            radii[c, n] = math.ceil(max(ex, ey)) if hit else 0
+            drawn[c, n] = True
+            radii[c, n] = math.ceil(max(ex, ey))
 
 
 @njit(cache=True, inline="always")
@@ -244,14 +235,15 @@ class _ProjectCPU(torch.autograd.Function):
         C, N = viewmats.shape[0], means.shape[0]
         dt = means.dtype
         a = [t.detach().to(dt).contiguous().numpy() for t in (means, quats, scales, opacities, viewmats, Ks)]
-        m2, con, cov = np.empty((C, N, 2), a[0].dtype), np.empty((C, N, 3), a[0].dtype), np.empty((C, N, 3), np.float64)
-        depth, valid, ext = np.empty((C, N), a[0].dtype), np.empty((C, N), np.bool_), np.empty((C, N, 2))
-        drawn, radii = np.empty((C, N), np.bool_), np.empty((C, N), np.int32)
+        zeros = lambda *shape, dt=a[0].dtype: np.zeros(shape, dt)   # noqa: E731 (calloc: a page on first write)
+        m2, con, depth = zeros(C, N, 2), zeros(C, N, 3), zeros(C, N)
+        cov, ext = zeros(C, N, 3, dt=np.float64), zeros(C, N, 2, dt=np.float64)
+        drawn, radii = zeros(C, N, dt=np.bool_), zeros(C, N, dt=np.int32)
         min_opacity = float(np.asarray(ALPHA_MIN, a[3].dtype))    # 1/255 as the opacities' dtype rounds it
         fwd = _project_fwd if C * N >= PARALLEL_MIN_WORK else _project_fwd_serial
-        fwd(*a, width, height, near, far, min_opacity, m2, con, cov, depth, valid, ext, drawn, radii)
+        fwd(*a, width, height, near, far, min_opacity, m2, con, cov, depth, ext, drawn, radii)
         ctx.saved = (a, width, height, drawn, cov)
-        const = [torch.from_numpy(x) for x in (valid, cov, ext, drawn, radii)]
+        const = [torch.from_numpy(x) for x in (cov, ext, drawn, radii)]
         ctx.mark_non_differentiable(*const)
         ctx.set_materialize_grads(False)    # no zero-filled [C, N] gradients for the constant outputs
         return (torch.from_numpy(m2), torch.from_numpy(con), torch.from_numpy(depth), *const)
@@ -272,11 +264,11 @@ class _ProjectCPU(torch.autograd.Function):
 
 
 def project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, near, far) -> dict:
-    """Fast projection for the tile compositor: ``project.project_gaussians``' outputs plus ``ext``
-    [C, N, 2] (``project.pixel_extent``), ``drawn`` [C, N] and ``radii`` [C, N] int32 (see
-    ``_project_fwd``). means2d, depths and valid are computed for every Gaussian; conics, cov2d and ext
-    only where drawn (conics and cov2d are 0 elsewhere). Differentiable w.r.t. means, quats and scales
-    through the cameras that draw each Gaussian."""
-    m2, con, depth, valid, cov, ext, drawn, radii = _ProjectCPU.apply(
+    """Fast projection for the tile compositor: ``project.project_gaussians``' means2d, conics,
+    depths and cov2d plus ``ext`` [C, N, 2] (``project.pixel_extent``), ``drawn`` [C, N] and ``radii``
+    [C, N] int32 (see ``_project_fwd``), all computed only where drawn and 0 elsewhere (no ``valid``:
+    a drawn pair is valid). Differentiable w.r.t. means, quats and scales through the cameras that
+    draw each Gaussian."""
+    m2, con, depth, cov, ext, drawn, radii = _ProjectCPU.apply(
         means, quats, scales, opacities, viewmats, Ks, width, height, float(near), float(far))
-    return dict(means2d=m2, conics=con, depths=depth, valid=valid, cov2d=cov, ext=ext, drawn=drawn, radii=radii)
+    return dict(means2d=m2, conics=con, depths=depth, cov2d=cov, ext=ext, drawn=drawn, radii=radii)

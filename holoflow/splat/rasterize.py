@@ -25,7 +25,8 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
     Returns dict(rgb [C, H, W, D], alpha [C, H, W, 1], depth [C, H, W, 1] = sum_i w_i z_i (accumulated
     camera z, metres; divide by alpha for the expected depth; None with ``depth=False``, which spares
     the compositing a channel: training needs none), meta = dict(means2d [C, N, 2] (keeps its
-    gradient for densification statistics), radii [C, N] int (0 = not drawn), depths [C, N]))."""
+    gradient for densification statistics), radii [C, N] int (0 = not drawn), depths [C, N]; the "cpu"
+    backend fills means2d and depths only where drawn, 0 elsewhere))."""
     if backend not in BACKENDS:
         raise ValueError(f"rasterize: unknown backend {backend!r}, expected one of {BACKENDS}")
     _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, width, height)
@@ -37,45 +38,51 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
     if backend == "cpu" and means.device.type != "cpu":
         raise ValueError(f"rasterize: backend 'cpu' needs CPU tensors, got {means.device}")
     C, N = viewmats.shape[0], means.shape[0]
-    ops = opacities[None].expand(C, N)
     if backend == "cpu":
+        from holoflow.splat.cpu import composite_cpu
         from holoflow.splat.cpu_project import project_cpu
 
         proj = project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, near, far)
-        ext, drawn, radii = proj["ext"], proj["drawn"], proj["radii"]                  # the same tests, fused
+        radii, drawn = proj["radii"], proj["drawn"]
+        # Each camera colours and composites only the Gaussians it draws (a few % of a panorama's);
+        # they stay in index order, so the image is the bytes the whole set would give.
+        outs = []
+        for c in range(C):
+            sel = drawn[c].nonzero()[:, 0]                                               # [n]
+            d = proj["depths"][c:c + 1, sel]                                             # [1, n]
+            feats = _features(means[sel], colors[sel], viewmats[c:c + 1], sh_degree, d, depth)
+            outs.append(composite_cpu(proj["means2d"][c:c + 1, sel], proj["conics"][c:c + 1, sel],
+                                      opacities[sel][None], feats, d, drawn[c:c + 1, sel],
+                                      proj["ext"][c:c + 1, sel], width, height))
+        out = torch.cat(outs)                                                            # [C, H, W, F]
     else:
+        from holoflow.splat.reference import composite_dense
+
+        ops = opacities[None].expand(C, N)
         proj = project_gaussians(means, quats, scales, viewmats, Ks, width, height, near, far)
         ext = pixel_extent(proj["cov2d"].detach(), ops.detach())                      # [C, N, 2]
         m2 = proj["means2d"].detach()
         on_screen = ((m2 + ext >= 0) & (m2 - ext <= m2.new_tensor([width, height]))).all(-1)
         drawn = proj["valid"] & on_screen & (ops.detach() >= 1 / 255)                  # [C, N]
         radii = torch.where(drawn, ext.max(-1).values.ceil(), torch.zeros_like(ext[..., 0])).to(torch.int32)
-    # The fast path colours and composites only the Gaussians some camera can draw (a few % of a
-    # panorama's per view). ``drawn`` holds every Gaussian the tile culling keeps (its test is the
-    # looser one), the kept ones stay in index order, so the images are the same bytes.
-    sel = drawn.any(0).nonzero()[:, 0] if backend == "cpu" else slice(None)            # [n]
-    depths = proj["depths"]
-    rgb = camera_colors(means[sel], colors[sel], viewmats, sh_degree)                      # [C, n, D]
-    D = rgb.shape[-1]
-    d_sel = depths[:, sel]
-    extra = [d_sel[..., None]] if depth else []
-    feats = torch.cat([rgb, *extra, torch.ones_like(d_sel[..., None])], -1)           # [C, n, D+1(+1)]
-    if backend == "reference":
-        from holoflow.splat.reference import composite_dense
-
-        out = composite_dense(proj["means2d"], proj["conics"], ops, feats, depths, proj["valid"],
+        feats = _features(means, colors, viewmats, sh_degree, proj["depths"], depth)
+        out = composite_dense(proj["means2d"], proj["conics"], ops, feats, proj["depths"], proj["valid"],
                               width, height)
-    else:
-        from holoflow.splat.cpu import composite_cpu
-
-        out = composite_cpu(proj["means2d"][:, sel], proj["conics"][:, sel], ops[:, sel], feats, d_sel,
-                            drawn[:, sel], ext[:, sel], width, height)
+    D = out.shape[-1] - (2 if depth else 1)
     alpha = out[..., -1:]
     color = out[..., :D]
     if background is not None:
         color = color + (1 - alpha) * background.to(color).reshape(-1, 1, 1, D)
     return dict(rgb=color, alpha=alpha, depth=out[..., D:D + 1] if depth else None,
-                meta=dict(means2d=proj["means2d"], radii=radii, depths=depths, backend=backend))
+                meta=dict(means2d=proj["means2d"], radii=radii, depths=proj["depths"], backend=backend))
+
+
+def _features(means, colors, viewmats, sh_degree, depths, depth: bool) -> torch.Tensor:
+    """What the compositor accumulates per camera and Gaussian [C, N, D (+1) + 1]: colour, the camera
+    z where ``depth`` is asked for, and 1 (alpha). depths [C, N]."""
+    rgb = camera_colors(means, colors, viewmats, sh_degree)                                 # [C, N, D]
+    extra = [depths[..., None]] if depth else []
+    return torch.cat([rgb, *extra, torch.ones_like(depths[..., None])], -1)
 
 
 def camera_colors(means: torch.Tensor, colors: torch.Tensor, viewmats: torch.Tensor,
@@ -179,7 +186,7 @@ def compile_ahead() -> None:
     cpu._bin_tiles_serial(i8(N), i8(N, 4), f8(N, 2), f4(N, 3), f4(N), f4(N, F), W, H, 1)
     cpu._boxes_serial(np.zeros(N, bool), f8(N, 2), f8(N, 2), f4(N), W, H, i8(N, 4))
     cp._project_fwd(f4(N, 3), f4(N, 4), f4(N, 3), f4(N), f4(C, 4, 4), f4(C, 3, 3), W, H, 0.01, 1e10, 0.004,
-                    f4(C, N, 2), f4(C, N, 3), f8(C, N, 3), f4(C, N), np.zeros((C, N), bool), f8(C, N, 2),
+                    f4(C, N, 2), f4(C, N, 3), f8(C, N, 3), f4(C, N), f8(C, N, 2),
                     np.zeros((C, N), bool), np.zeros((C, N), np.int32))
     for n, depth in ((cp.PARALLEL_MIN_WORK, True), (2 * cpu.PARALLEL_MIN_GAUSSIANS, False)):  # work = n
         s = surface_scene(n)
