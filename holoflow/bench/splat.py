@@ -76,11 +76,12 @@ def run_one(n: int, size: int, repeat: int, ref_mem_gb: float, threads: int | No
     row["fast_fwd_bwd_s"] = _time(fwd_bwd("cpu"), repeat)
     row["fast_peak_rss_mb"] = _peak_rss_mb()
     with torch.no_grad():                            # pairs evaluated by the fast path
-        pr = project_cpu(*params[:4], vm, K, size, size, 0.01, 1e10)
-        feats = torch.cat([sc["colors"], pr["depths"][0, :, None], torch.ones(n, 1)], 1).numpy()
-        pairs = float(count_pairs(pr["means2d"].numpy()[0].astype(np.float64), pr["conics"].numpy()[0],
-                                  sc["opacities"].numpy(), feats, pr["depths"].numpy()[0],
-                                  pr["drawn"].numpy()[0], pr["ext"][0].numpy().astype(np.float64), size, size))
+        pr = project_cpu(*params[:4], vm, K, size, size, 0.01, 1e10)         # packed: the drawn ones
+        g = pr["gaussian_ids"]
+        feats = torch.cat([sc["colors"][g], pr["depths"][:, None], torch.ones(len(g), 1)], 1).numpy()
+        pairs = float(count_pairs(pr["means2d"].numpy().astype(np.float64), pr["conics"].numpy(),
+                                  sc["opacities"][g].numpy(), feats, pr["depths"].numpy(),
+                                  np.ones(len(g), bool), pr["ext"].numpy(), size, size))
     row["pairs"] = pairs
     row["gaussians_per_pixel"] = pairs / size ** 2
     ref_bytes = 12 * 4 * size * size * n             # ~12 float32 [P, N] tensors kept for backward

@@ -25,8 +25,10 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
     Returns dict(rgb [C, H, W, D], alpha [C, H, W, 1], depth [C, H, W, 1] = sum_i w_i z_i (accumulated
     camera z, metres; divide by alpha for the expected depth; None with ``depth=False``, which spares
     the compositing a channel: training needs none), meta = dict(means2d [C, N, 2] (keeps its
-    gradient for densification statistics), radii [C, N] int (0 = not drawn), depths [C, N]; the "cpu"
-    backend fills means2d and depths only where drawn, 0 elsewhere))."""
+    gradient for densification statistics), radii [C, N] int (0 = not drawn), depths [C, N],
+    packed=False); the "cpu" backend's meta is packed (as gsplat's ``packed=True``): one row per
+    drawn (camera, Gaussian) pair, means2d [P, 2], radii [P] (>= 1), depths [P], camera_ids [P] and
+    gaussian_ids [P], packed=True)."""
     if backend not in BACKENDS:
         raise ValueError(f"rasterize: unknown backend {backend!r}, expected one of {BACKENDS}")
     _check_shapes(means, quats, scales, opacities, colors, viewmats, Ks, width, height)
@@ -43,18 +45,21 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
         from holoflow.splat.cpu_project import project_cpu
 
         proj = project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, near, far)
-        radii, drawn = proj["radii"], proj["drawn"]
-        # Each camera colours and composites only the Gaussians it draws (a few % of a panorama's);
-        # they stay in index order, so the image is the bytes the whole set would give.
+        gid, start = proj["gaussian_ids"], proj["camera_start"].tolist()
+        # Each camera colours and composites only the Gaussians it draws (a few % of a panorama's),
+        # in index order, so the image is the bytes the whole set would give.
         outs = []
         for c in range(C):
-            sel = drawn[c].nonzero()[:, 0]                                               # [n]
-            d = proj["depths"][c:c + 1, sel]                                             # [1, n]
-            feats = _features(means[sel], colors[sel], viewmats[c:c + 1], sh_degree, d, depth)
-            outs.append(composite_cpu(proj["means2d"][c:c + 1, sel], proj["conics"][c:c + 1, sel],
-                                      opacities[sel][None], feats, d, drawn[c:c + 1, sel],
-                                      proj["ext"][c:c + 1, sel], width, height))
+            rows = slice(start[c], start[c + 1])
+            g, d = gid[rows], proj["depths"][None, rows]                                  # [n], [1, n]
+            feats = _features(means[g], colors[g], viewmats[c:c + 1], sh_degree, d, depth)
+            outs.append(composite_cpu(proj["means2d"][None, rows], proj["conics"][None, rows],
+                                      opacities[g][None], feats, d, torch.ones_like(d, dtype=torch.bool),
+                                      proj["ext"][None, rows], width, height))
         out = torch.cat(outs)                                                            # [C, H, W, F]
+        camera_ids = torch.repeat_interleave(torch.arange(C), torch.diff(proj["camera_start"]))
+        meta = dict(means2d=proj["means2d"], radii=proj["radii"], depths=proj["depths"],
+                    camera_ids=camera_ids, gaussian_ids=gid, packed=True)
     else:
         from holoflow.splat.reference import composite_dense
 
@@ -68,13 +73,14 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
         feats = _features(means, colors, viewmats, sh_degree, proj["depths"], depth)
         out = composite_dense(proj["means2d"], proj["conics"], ops, feats, proj["depths"], proj["valid"],
                               width, height)
+        meta = dict(means2d=proj["means2d"], radii=radii, depths=proj["depths"], packed=False)
     D = out.shape[-1] - (2 if depth else 1)
     alpha = out[..., -1:]
     color = out[..., :D]
     if background is not None:
         color = color + (1 - alpha) * background.to(color).reshape(-1, 1, 1, D)
     return dict(rgb=color, alpha=alpha, depth=out[..., D:D + 1] if depth else None,
-                meta=dict(means2d=proj["means2d"], radii=radii, depths=proj["depths"], backend=backend))
+                meta=dict(meta, backend=backend))
 
 
 def _features(means, colors, viewmats, sh_degree, depths, depth: bool) -> torch.Tensor:
@@ -151,7 +157,7 @@ def _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, wid
         radii = radii.max(-1).values
     return dict(rgb=color, alpha=ra, depth=z,
                 meta=dict(means2d=meta["means2d"], radii=radii.to(torch.int32), depths=meta["depths"],
-                          backend="gsplat"))
+                          packed=False, backend="gsplat"))
 
 
 def compile_ahead() -> None:
@@ -177,17 +183,20 @@ def compile_ahead() -> None:
     C, N, F, W, H = 1, 0, 4, 16, 16
     cpu._bin_tiles(i8(N), i8(N, 4), f8(N, 2), f4(N, 3), f4(N), f4(N, F), W, H, 1)
     cpu._boxes(np.zeros(N, bool), f8(N, 2), f8(N, 2), f4(N), W, H, i8(N, 4))
-    cp._project_bwd(f4(N, 3), f4(N, 4), f4(N, 3), f4(C, 4, 4), f4(C, 3, 3), W, H, np.zeros((C, N), bool),
-                    f8(C, N, 3), f4(C, N, 2), f4(C, N, 3), f4(C, N), f4(N, 3), f4(N, 4), f4(N, 3))
+    cp._project_bwd_params(f4(N, 4), f4(N, 3), f8(N, 9), f8(N, 3), f4(N, 3), f4(N, 4), f4(N, 3))
+    cp._project_bwd_pairs(f4(N, 3), f4(N, 4), f4(N, 3), f4(C, 4, 4), f4(C, 3, 3), W, H, i8(C + 1), i8(N),
+                          f8(N, 3), f4(N, 2), f4(N, 3), f4(N), f8(N, 9), f8(N, 3))
     cpu._gather_grads(i8(1), i8(N), i8(N), f8(N, 6 + F), f4(N, 2), f4(N, 3), f4(N), f4(N, F))
     pack = (f8(N, 7), i8(N, 4), f8(N, F), i8(1), i8(N), W, H)        # rec, pbox, ft, offsets, ids: no tiles
     cpu._backward(*pack, f8(H, W), i8(H, W), f8(H, W, F), f8(N, 6 + F))
     cpu._forward(*pack, f4(H, W, F), f8(H, W), i8(H, W), i8(1))
     cpu._bin_tiles_serial(i8(N), i8(N, 4), f8(N, 2), f4(N, 3), f4(N), f4(N, F), W, H, 1)
     cpu._boxes_serial(np.zeros(N, bool), f8(N, 2), f8(N, 2), f4(N), W, H, i8(N, 4))
-    cp._project_fwd(f4(N, 3), f4(N, 4), f4(N, 3), f4(N), f4(C, 4, 4), f4(C, 3, 3), W, H, 0.01, 1e10, 0.004,
-                    f4(C, N, 2), f4(C, N, 3), f8(C, N, 3), f4(C, N), f8(C, N, 2),
-                    np.zeros((C, N), bool), np.zeros((C, N), np.int32))
+    cam = (f4(N, 3), f4(N, 4), f4(N, 3), f4(N), f4(C, 4, 4), f4(C, 3, 3), W, H, 0.01, 1e10)
+    cp._project_write(*cam, np.zeros((C, N), bool), i8(1, C), i8(N), f4(N, 2), f4(N, 3), f8(N, 3), f4(N),
+                      f8(N, 2), np.zeros(N, np.int32))
+    cp._count_chunks(np.zeros((C, N), bool), i8(1, C))
+    cp._project_test(*cam, 0.004, np.zeros((C, N), bool))
     for n, depth in ((cp.PARALLEL_MIN_WORK, True), (2 * cpu.PARALLEL_MIN_GAUSSIANS, False)):  # work = n
         s = surface_scene(n)
         params = [s[k].requires_grad_() for k in ("means", "quats", "scales", "opacities", "colors")]

@@ -36,15 +36,24 @@ class DefaultStrategy:
 
     @torch.no_grad()
     def step_pre_optimizer(self, it: int, means2d: torch.Tensor, radii: torch.Tensor, width: int,
-                           height: int) -> None:
-        """Accumulate step ``it``'s statistics: ``means2d`` [1, N, 2] (px, with ``.grad``), ``radii`` [1, N]
-        (px; 0 = not visible) of a ``width`` x ``height`` render."""
+                           height: int, gaussian_ids: torch.Tensor | None = None) -> None:
+        """Accumulate step ``it``'s statistics of one camera's ``width`` x ``height`` render:
+        ``means2d`` [1, N, 2] (px, with ``.grad``) and ``radii`` [1, N] (px; 0 = not visible), or packed
+        as the fast path's meta is: ``gaussian_ids`` [P] the Gaussian of each row of means2d [P, 2] and
+        radii [P] (all visible)."""
         if it >= self.cfg.densify_until or means2d.grad is None:
+            return
+        st = self.state
+        scale = means2d.new_tensor([width / 2, height / 2])
+        if gaussian_ids is not None:
+            g = (means2d.grad * scale).norm(dim=-1)                                  # [P] NDC units
+            st["grad"].index_add_(0, gaussian_ids, g)
+            st["count"].index_add_(0, gaussian_ids, torch.ones_like(g))
+            st["radii"].scatter_reduce_(0, gaussian_ids, radii.float(), "amax")
             return
         r = radii[0].float()                                                        # [N]
         vis = r > 0                                                                 # masks, not indices: no sync
-        g = (means2d.grad[0] * means2d.new_tensor([width / 2, height / 2])).norm(dim=-1)  # [N] NDC units
-        st = self.state
+        g = (means2d.grad[0] * scale).norm(dim=-1)                                  # [N] NDC units
         st["grad"] += torch.where(vis, g, 0.0)
         st["count"] += vis
         st["radii"] = torch.where(vis, torch.maximum(st["radii"], r), st["radii"])

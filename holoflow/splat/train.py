@@ -156,7 +156,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
         loss = masked_loss(out["rgb"][0], image, mask, cfg.lambda_dssim)
         loss.backward()
         losses.append(loss.detach())
-        strategy.step_pre_optimizer(it, means2d, out["meta"]["radii"], W, H)
+        strategy.step_pre_optimizer(it, means2d, out["meta"]["radii"], W, H, out["meta"].get("gaussian_ids"))
         with torch.no_grad():
             opt.step()
             opt.zero_grad(set_to_none=True)

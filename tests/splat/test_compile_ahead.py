@@ -62,12 +62,13 @@ json.dump({"ahead": ahead, "after": kernels()}, sys.stdout)
 # for views and clouds below the parallel thresholds only, compile_ahead leaves them to first use
 ENTRY = ["holoflow.splat.cpu." + k for k in ("_boxes", "_bin_tiles", "_forward", "_backward", "_gather_grads",
                                              "_boxes_serial", "_bin_tiles_serial")] + \
-        ["holoflow.splat.cpu_project._project_fwd", "holoflow.splat.cpu_project._project_bwd",
-         "holoflow.geometry.zbuffer_cpu.zbuffer", "holoflow.geometry.layers._grow",
-         "holoflow.recon.inpaint._walk"]
+        ["holoflow.splat.cpu_project." + k for k in ("_project_test", "_count_chunks", "_project_write",
+                                                     "_project_bwd_pairs", "_project_bwd_params")] + \
+        ["holoflow.geometry.zbuffer_cpu.zbuffer", "holoflow.geometry.layers._grow", "holoflow.recon.inpaint._walk"]
 LEFT = ["holoflow.splat.cpu._forward_serial", "holoflow.splat.cpu._backward_serial",
-        "holoflow.splat.cpu._gather_grads_serial", "holoflow.splat.cpu_project._project_fwd_serial",
-        "holoflow.splat.cpu_project._project_bwd_serial"]
+        "holoflow.splat.cpu._gather_grads_serial"] + \
+       ["holoflow.splat.cpu_project." + k + "_serial" for k in ("_project_test", "_count_chunks", "_project_write",
+                                                                "_project_bwd_pairs", "_project_bwd_params")]
 
 
 def kernel_files() -> list[str]:

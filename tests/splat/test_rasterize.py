@@ -29,6 +29,19 @@ def assert_radii_match(got, want):
     assert int(d.max()) <= 1 and float((d > 0).float().mean()) <= 0.01, int((d > 0).sum())
 
 
+def unpack(values, camera_ids, gaussian_ids, C, N):
+    """A packed [P, ...] output of the fast path (one row per drawn pair) as [C, N, ...], 0 elsewhere."""
+    out = values.new_zeros((C, N, *values.shape[1:]))
+    out[camera_ids, gaussian_ids] = values
+    return out
+
+
+def dense_meta(out, C, N):
+    """The fast path's packed meta as the dense backends give it: means2d [C, N, 2], radii [C, N]."""
+    m = out["meta"]
+    return {k: unpack(m[k].detach(), m["camera_ids"], m["gaussian_ids"], C, N) for k in ("means2d", "radii")}
+
+
 def cameras(width, height, dtype=torch.float64, n=2):
     eyes = [[0, 0, 0], [0.3, -0.2, 0.1], [-0.4, 0.1, -0.2]][:n]
     vm = torch.stack([look_at(e, [0, 0, 3]) for e in eyes]).to(dtype)
@@ -57,9 +70,11 @@ def test_fast_matches_reference(seed, sh, dtype):
     for k in ("rgb", "alpha", "depth"):
         assert fast[k].shape == ref[k].shape
         torch.testing.assert_close(fast[k], ref[k], **tol)
-    drawn = fast["meta"]["radii"] > 0                     # the fast path projects only those
-    torch.testing.assert_close(fast["meta"]["means2d"][drawn], ref["meta"]["means2d"][drawn], **tol)
-    assert_radii_match(fast["meta"]["radii"], ref["meta"]["radii"])
+    assert fast["meta"]["packed"] and not ref["meta"]["packed"]
+    meta = dense_meta(fast, 2, 60)
+    drawn = meta["radii"] > 0                              # the fast path projects only those
+    torch.testing.assert_close(meta["means2d"][drawn], ref["meta"]["means2d"][drawn].detach(), **tol)
+    assert_radii_match(meta["radii"], ref["meta"]["radii"])
     gtol = dict(rtol=1e-8, atol=1e-8) if dtype == torch.float64 else dict(rtol=2e-3, atol=2e-3)
     for k in NAMES:
         scale = gref[k].abs().max().clamp_min(1.0)
@@ -88,6 +103,28 @@ def test_deterministic():
     b, gb = render_and_grads(p, vm, K, 31, 23, "cpu")
     # the numba kernels' sums run in a fixed order whatever the thread count: exact on any CPU
     assert torch.equal(a["rgb"], b["rgb"]) and all(torch.equal(ga[k], gb[k]) for k in NAMES)
+
+
+def test_packed_projection_parallel_equals_serial(monkeypatch):
+    # several chunks of Gaussians, three cameras: the parallel passes place every pair where the serial
+    # ones do, and the backward sums each Gaussian's cameras in the same order: exact on any CPU
+    from holoflow.splat import cpu_project as cp
+
+    n = 2 * cp.CHUNK + 300
+    p = random_scene(n, 9, torch.float32)
+    with torch.no_grad():
+        p["means"][:, :2] *= 2                                 # some off-screen in each camera
+    vm, K = cameras(40, 30, torch.float32, n=3)
+    got = []
+    for threshold in (0, 10 ** 12):                             # parallel kernels, serial twins
+        monkeypatch.setattr(cp, "PARALLEL_MIN_WORK", threshold)
+        out = cp.project_cpu(*[p[k] for k in ("means", "quats", "scales", "opacities")], vm, K, 40, 30, 0.01, 1e10)
+        loss = (out["means2d"] * 0.3).sum() + out["conics"].sum() + 0.1 * out["depths"].sum()
+        grads = torch.autograd.grad(loss, [p[k] for k in ("means", "quats", "scales")])
+        got.append(([out[k].detach() for k in ("gaussian_ids", "camera_start", "means2d", "conics", "radii")], grads))
+    (a, ga), (b, gb) = got
+    assert 0 < len(a[0]) < 3 * n and all(torch.equal(x, y) for x, y in zip(a, b))
+    assert all(torch.equal(x, y) for x, y in zip(ga, gb))
 
 
 @pytest.mark.parametrize("chunks", [1, 3, 8, 64])
@@ -169,7 +206,7 @@ def test_hard_cases_finite_and_consistent(case):
     if case == "looking_up":
         assert ref["alpha"].max() > 0.1
     if case == "behind_camera":
-        assert (fast["meta"]["radii"][0, :6] == 0).all()
+        assert not (fast["meta"]["gaussian_ids"] < 6).any()
 
 
 def test_bad_inputs_raise():
@@ -239,7 +276,7 @@ def test_fast_matches_reference_when_most_gaussians_are_out_of_view(dtype):
     tol = dict(rtol=1e-9, atol=1e-10) if dtype == torch.float64 else dict(rtol=1e-4, atol=2e-5)
     for k in ("rgb", "alpha", "depth"):
         torch.testing.assert_close(fast[k], ref[k], **tol)
-    assert_radii_match(fast["meta"]["radii"], ref["meta"]["radii"])
+    assert_radii_match(dense_meta(fast, 1, n)["radii"], ref["meta"]["radii"])
     gtol = dict(rtol=1e-8, atol=1e-8) if dtype == torch.float64 else dict(rtol=2e-3, atol=2e-3)
     for k in NAMES:
         scale = gref[k].abs().max().clamp_min(1.0)
@@ -259,7 +296,14 @@ def test_fast_projection_draws_what_the_reference_tests_draw(dtype):
     p["means"][:, :2] *= 3                                    # many centres off-screen
     W, H = 40, 30
     vm, K = cameras(W, H, dtype, n=3)
-    fast = project_cpu(p["means"], p["quats"], p["scales"], p["opacities"], vm, K, W, H, 0.01, 1e10)
+    packed = project_cpu(p["means"], p["quats"], p["scales"], p["opacities"], vm, K, W, H, 0.01, 1e10)
+    start, gid = packed["camera_start"], packed["gaussian_ids"]
+    for c in range(3):                                       # camera by camera, Gaussians ascending
+        assert (torch.diff(gid[start[c]:start[c + 1]]) > 0).all()
+    cam = torch.repeat_interleave(torch.arange(3), torch.diff(start))
+    fast = {k: unpack(packed[k], cam, gid, 3, 600) for k in ("means2d", "conics", "depths", "ext", "radii")}
+    fast["drawn"] = unpack(torch.ones(len(gid), dtype=torch.bool), cam, gid, 3, 600)
+    assert (packed["radii"] >= 1).all()
     ref = project_gaussians(p["means"], p["quats"], p["scales"], vm, K, W, H, 0.01, 1e10)
     ops = p["opacities"][None].expand(3, -1)
     ext = pixel_extent(ref["cov2d"], ops)
@@ -279,9 +323,6 @@ def test_fast_projection_draws_what_the_reference_tests_draw(dtype):
     torch.testing.assert_close(fast["conics"][drawn], ref["conics"][drawn], **tol)
     torch.testing.assert_close(fast["means2d"][drawn], m2[drawn], **tol)
     torch.testing.assert_close(fast["depths"][drawn], ref["depths"][drawn], **tol)
-    skipped = ~fast["drawn"]                                   # nothing computed, nothing written
-    for k in ("means2d", "conics", "depths", "cov2d", "ext", "radii"):
-        assert not fast[k][skipped].any(), k
 
 
 @pytest.mark.parametrize("backend", ["reference", "cpu"])

@@ -53,6 +53,32 @@ def test_statistics_accumulate_over_visible_gaussians_only():
     assert strat.state["count"].tolist() == [0, 2, 2, 2, 2, 0]
 
 
+def test_packed_statistics_equal_dense_ones():
+    # the fast path's meta has one row per drawn Gaussian (gaussian_ids); gsplat's and the reference's
+    # one per Gaussian with radius 0 where not drawn: the same statistics either way
+    g = torch.Generator().manual_seed(3)
+    n, rows = 7, torch.tensor([1, 2, 4, 6])
+    grad = torch.randn(1, n, 2, generator=g) * 1e-3
+    radii = torch.zeros(1, n)
+    radii[0, rows] = torch.tensor([2.0, 5.0, 1.0, 3.0])
+    states = []
+    for packed in (False, True):
+        _, _, strat = _setup(n)
+        for it in (1, 2):
+            if packed:
+                m2 = torch.zeros(len(rows), 2, requires_grad=True)
+                m2.grad = grad[0, rows] * it
+                strat.step_pre_optimizer(it, m2, radii[0, rows].int(), 200, 100, rows)
+            else:
+                m2 = torch.zeros(1, n, 2, requires_grad=True)
+                m2.grad = grad * it
+                strat.step_pre_optimizer(it, m2, radii, 200, 100)
+        states.append(strat.state)
+    for k in ("grad", "count", "radii"):
+        assert torch.equal(states[0][k], states[1][k]), k
+    assert states[1]["count"].tolist() == [0, 2, 2, 0, 2, 0, 2]
+
+
 def test_clone_small_split_large_then_state_restarts():
     model, opt, strat = _setup()
     _grads(strat, model, [0, 3])
