@@ -197,14 +197,15 @@ def _meets(mx, my, ex, ey, width, height):
 
 
 @njit(parallel=True, cache=True)
-def _project_bwd_pairs(means, quats, scales, view, Ks, width, height, start, gid, cov, g_m2, g_con,
+def _project_bwd_pairs(means, quats, scales, view, Ks, width, height, start, gid, slot, cov, g_m2, g_con,
                        g_depth, gS, gm):
-    """Each drawn pair's gradient added into its Gaussian's dL/dSigma gS [N, 9] (full 3x3) and dL/dmean
-    gm [N, 3] (float64, zeroed by the caller): camera after camera (pairs of one camera are distinct
-    Gaussians, so its pairs run in parallel), the sums in camera order for any thread count."""
+    """Each drawn pair's gradient added into its Gaussian's row ``slot[p]`` of dL/dSigma gS [U, 9] (full
+    3x3) and dL/dmean gm [U, 3] (float64, zeroed by the caller; U the Gaussians some camera draws):
+    camera after camera (pairs of one camera are distinct Gaussians, so its pairs run in parallel),
+    the sums in camera order for any thread count."""
     for c in range(view.shape[0]):
         for p in prange(start[c], start[c + 1]):
-            n = gid[p]
+            n, row = gid[p], slot[p]
             _, _, _, S = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
                                      scales[n, 0], scales[n, 1], scales[n, 2])
             x, y, z, fx, fy, cx, cy, lim = _camera(view, Ks, c, means, n, width, height)
@@ -225,7 +226,7 @@ def _project_bwd_pairs(means, quats, scales, view, Ks, width, height, start, gid
             gw1 = (gb * p0[0] + 2 * gc * p1[0], gb * p0[1] + 2 * gc * p1[1], gb * p0[2] + 2 * gc * p1[2])
             for i in range(3):
                 for k in range(3):
-                    gS[n, 3 * i + k] += (ga * r0[i] * r0[k] + 0.5 * gb * (r0[i] * r1[k] + r1[i] * r0[k])
+                    gS[row, 3 * i + k] += (ga * r0[i] * r0[k] + 0.5 * gb * (r0[i] * r1[k] + r1[i] * r0[k])
                                          + gc * r1[i] * r1[k])
             gz = g_depth[p] - (_dot(gw0, r0) + _dot(gw1, r1)) / z
             gu = -(fx / z) * (gw0[0] * view[c, 2, 0] + gw0[1] * view[c, 2, 1] + gw0[2] * view[c, 2, 2])
@@ -234,27 +235,26 @@ def _project_bwd_pairs(means, quats, scales, view, Ks, width, height, start, gid
             guy = fy * g_m2[p, 1] + (gv if lim[2] <= uy <= lim[3] else 0.0)
             gx, gy = gux / z, guy / z
             gz -= (gux * x + guy * y) / (z * z)
-            gm[n, 0] += view[c, 0, 0] * gx + view[c, 1, 0] * gy + view[c, 2, 0] * gz
-            gm[n, 1] += view[c, 0, 1] * gx + view[c, 1, 1] * gy + view[c, 2, 1] * gz
-            gm[n, 2] += view[c, 0, 2] * gx + view[c, 1, 2] * gy + view[c, 2, 2] * gz
+            gm[row, 0] += view[c, 0, 0] * gx + view[c, 1, 0] * gy + view[c, 2, 0] * gz
+            gm[row, 1] += view[c, 0, 1] * gx + view[c, 1, 1] * gy + view[c, 2, 1] * gz
+            gm[row, 2] += view[c, 0, 2] * gx + view[c, 1, 2] * gy + view[c, 2, 2] * gz
 
 
 @njit(parallel=True, cache=True)
-def _project_bwd_params(quats, scales, gS, gm, g_means, g_quats, g_scales):
-    """dL/dSigma and dL/dmean per Gaussian -> gradients of means, quats and scales (zeroed by the
-    caller; Gaussians no camera draws keep 0)."""
-    for n in prange(quats.shape[0]):
-        if gm[n, 0] == 0.0 and gm[n, 1] == 0.0 and gm[n, 2] == 0.0 and not gS[n].any():
-            continue
+def _project_bwd_params(quats, scales, drawn_ids, gS, gm, g_means, g_quats, g_scales):
+    """dL/dSigma and dL/dmean of the Gaussians ``drawn_ids`` [U] (rows of gS [U, 9], gm [U, 3]) ->
+    their gradients of means, quats and scales (zeroed by the caller: the others keep 0)."""
+    for u in prange(drawn_ids.shape[0]):
+        n = drawn_ids[u]
         q, Rq, m, _ = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
                                   scales[n, 0], scales[n, 1], scales[n, 2])
-        g_means[n, 0], g_means[n, 1], g_means[n, 2] = gm[n, 0], gm[n, 1], gm[n, 2]
+        g_means[n, 0], g_means[n, 1], g_means[n, 2] = gm[u, 0], gm[u, 1], gm[u, 2]
         # Sigma = M M^T -> gM = 2 gS M; M = Rq diag(s) -> gR = gM diag(s), gs_k = sum_i gM_ik Rq_ik
         gR = np.empty(9)
         for k in range(3):
             acc = 0.0
             for i in range(3):
-                gM = 2 * (gS[n, 3 * i] * m[k] + gS[n, 3 * i + 1] * m[3 + k] + gS[n, 3 * i + 2] * m[6 + k])
+                gM = 2 * (gS[u, 3 * i] * m[k] + gS[u, 3 * i + 1] * m[3 + k] + gS[u, 3 * i + 2] * m[6 + k])
                 gR[3 * i + k] = gM * scales[n, k]
                 acc += gM * Rq[3 * i + k]
             g_scales[n, k] = acc
@@ -316,14 +316,16 @@ class _ProjectCPU(torch.autograd.Function):
         P, N, C = gid.shape[0], means.shape[0], view.shape[0]
         prep = lambda g, shape: (np.zeros(shape, means.dtype) if g is None  # noqa: E731
                                  else g.detach().to(torch.from_numpy(means).dtype).contiguous().numpy())
-        gS, gm = np.zeros((N, 9)), np.zeros((N, 3))
+        # the Gaussians some camera draws, and each pair's row among them (one camera: the pairs)
+        drawn_ids, slot = (gid, np.arange(P)) if C == 1 else np.unique(gid, return_inverse=True)
+        gS, gm = np.zeros((len(drawn_ids), 9)), np.zeros((len(drawn_ids), 3))
         par = C * N >= PARALLEL_MIN_WORK
         (_project_bwd_pairs if par else _project_bwd_pairs_serial)(
-            means, quats, scales, view, Ks, width, height, start, gid, cov, prep(g_m2, (P, 2)),
+            means, quats, scales, view, Ks, width, height, start, gid, slot, cov, prep(g_m2, (P, 2)),
             prep(g_con, (P, 3)), prep(g_depth, (P,)), gS, gm)
         g_means, g_quats, g_scales = np.zeros_like(means), np.zeros_like(quats), np.zeros_like(scales)
-        (_project_bwd_params if par else _project_bwd_params_serial)(quats, scales, gS, gm, g_means,
-                                                                     g_quats, g_scales)
+        (_project_bwd_params if par else _project_bwd_params_serial)(quats, scales, drawn_ids, gS, gm,
+                                                                     g_means, g_quats, g_scales)
         return (torch.from_numpy(g_means), torch.from_numpy(g_quats), torch.from_numpy(g_scales),
                 None, None, None, None, None, None, None)
 

@@ -183,9 +183,9 @@ def compile_ahead() -> None:
     C, N, F, W, H = 1, 0, 4, 16, 16
     cpu._bin_tiles(i8(N), i8(N, 4), f8(N, 2), f4(N, 3), f4(N), f4(N, F), W, H, 1)
     cpu._boxes(np.zeros(N, bool), f8(N, 2), f8(N, 2), f4(N), W, H, i8(N, 4))
-    cp._project_bwd_params(f4(N, 4), f4(N, 3), f8(N, 9), f8(N, 3), f4(N, 3), f4(N, 4), f4(N, 3))
+    cp._project_bwd_params(f4(N, 4), f4(N, 3), i8(N), f8(N, 9), f8(N, 3), f4(N, 3), f4(N, 4), f4(N, 3))
     cp._project_bwd_pairs(f4(N, 3), f4(N, 4), f4(N, 3), f4(C, 4, 4), f4(C, 3, 3), W, H, i8(C + 1), i8(N),
-                          f8(N, 3), f4(N, 2), f4(N, 3), f4(N), f8(N, 9), f8(N, 3))
+                          i8(N), f8(N, 3), f4(N, 2), f4(N, 3), f4(N), f8(N, 9), f8(N, 3))
     cpu._gather_grads(i8(1), i8(N), i8(N), f8(N, 6 + F), f4(N, 2), f4(N, 3), f4(N), f4(N, F))
     pack = (f8(N, 7), i8(N, 4), f8(N, F), i8(1), i8(N), W, H)        # rec, pbox, ft, offsets, ids: no tiles
     cpu._backward(*pack, f8(H, W), i8(H, W), f8(H, W, F), f8(N, 6 + F))
