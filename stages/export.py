@@ -24,7 +24,7 @@ def main() -> int:
     cfg = job.config(ExportParams)
     formats = cfg.format_list
     fields = read_gaussians(job.input_file("scene", "scene.ply"))
-    sizes = ExportParams.ENGINES.get(job.engine)(fields, job.output_dir, formats)
+    sizes = ExportParams.ENGINES.get(job.engine)(fields, job.output_dir, formats, job.cpus)
     mesh_info = {}
     if "mesh" in formats:
         rgb = torch.from_numpy(read_rgb(job.input_file("pano", "pano.exr"))).double()   # [H, W, 3] linear
