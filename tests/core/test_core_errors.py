@@ -129,3 +129,19 @@ def test_fixture_pipeline_is_valid():
 
     p = pipeline.load(FIXTURES / "pipeline.yaml")
     assert list(p.stages) == ["gen", "upper", "join"]
+
+
+@pytest.mark.parametrize("tail, words", [
+    ("MemoryError: Unable to allocate 512. MiB", "out of memory"),
+    ("RuntimeError: can't start new thread", "out of memory or of threads"),
+    ("OSError: [Errno 28] No space left on device", "a disk is full"),
+    ("ValueError: bad shape", None),
+])
+def test_exit_reason_reads_the_log_tail(tail, words):
+    # a step's exit code alone says nothing of why; the words come from what its log says
+    from holoflow.flow.executors.failure import exit_reason
+
+    reason = exit_reason(1, "Traceback (most recent call last):\n" + tail)
+    assert reason.startswith("exit code 1")
+    assert (words in reason) if words else reason == "exit code 1"
+    assert exit_reason(-9, tail) == "killed by signal 9"

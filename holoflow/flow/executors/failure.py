@@ -23,6 +23,9 @@ LOG_MARKS = (
     (("MemoryError", "std::bad_alloc", "Cannot allocate memory", "out of memory",
       "failed to map segment from shared object"),
      "out of memory (its log says so: lower the stage's sizes or give it more memory)"),
+    (("can't start new thread",),       # a thread's stack could not be mapped, or a thread limit hit
+     "out of memory or of threads (its log says a thread could not start: give it more memory, or "
+     "raise the process's thread limit)"),
     (("No space left on device", "Disk quota exceeded"), "a disk is full (its log says so)"),
     (("Read-only file system",), "a file system is read-only (its log says so)"),
 )
