@@ -56,6 +56,9 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
             outs.append(composite_cpu(proj["means2d"][None, rows], proj["conics"][None, rows],
                                       opacities[g][None], feats, d, torch.ones_like(d, dtype=torch.bool),
                                       proj["ext"][None, rows], width, height))
+        if not outs:                                                                     # no camera
+            F = _features(means[:0], colors[:0], viewmats, sh_degree, means.new_zeros(0, 0), depth).shape[-1]
+            outs = [means.new_zeros(0, height, width, F)]
         out = torch.cat(outs)                                                            # [C, H, W, F]
         camera_ids = torch.repeat_interleave(torch.arange(C), torch.diff(proj["camera_start"]))
         meta = dict(means2d=proj["means2d"], radii=proj["radii"], depths=proj["depths"],

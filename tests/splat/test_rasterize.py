@@ -209,6 +209,14 @@ def test_hard_cases_finite_and_consistent(case):
         assert not (fast["meta"]["gaussian_ids"] < 6).any()
 
 
+@pytest.mark.parametrize("backend", ["reference", "cpu"])
+def test_no_camera_renders_nothing(backend):
+    p = random_scene(10, 2, torch.float32)
+    out = rasterize(*[p[k] for k in NAMES], torch.zeros(0, 4, 4), torch.zeros(0, 3, 3), 8, 6, backend=backend)
+    assert out["rgb"].shape == (0, 6, 8, 3) and out["alpha"].shape == (0, 6, 8, 1)
+    assert out["depth"].shape == (0, 6, 8, 1)
+
+
 def test_bad_inputs_raise():
     p = random_scene(3, 0, torch.float32)
     vm, K = cameras(8, 8, torch.float32, n=1)
