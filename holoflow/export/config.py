@@ -16,7 +16,7 @@ class ExportParams(StageParams):
     """The final scene (transfer_opt) in the formats web and game tools read, and the panorama's RGB-D
     (detail + metric_align) as a vertex-coloured mesh (holoflow/export/, docs/viewers.md)."""
 
-    ENGINES = Engines("one engine, the writers: export_formats(scene fields, out_dir, formats, threads) "
+    ENGINES = Engines("one engine, the writers: export_formats(scene fields, out_dir, formats, workers) "
                       "(holoflow/export/splats.py)",
                       default="holoflow.export.formats:export_formats")
 
