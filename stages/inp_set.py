@@ -17,7 +17,7 @@ def main() -> int:
 
     from holoflow.recon.config import InpSetParams
     from holoflow.recon.inpaint import inpaint_views, missing_mask
-    from holoflow.recon.schedule import render_views
+    from holoflow.recon.optimize import render_views
     from holoflow.recon.views import load_view_set, write_images, write_view_set
     from holoflow.splat import GaussianModel
 

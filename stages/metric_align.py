@@ -15,7 +15,7 @@ def main() -> int:
     job = Job.from_argv()
     from holoflow.depth import panorama as pd
     from holoflow.depth.config import MetricAlignParams
-    from holoflow.depth.io import read_disparity, read_pano, read_truth
+    from holoflow.depth.inputs import read_disparity, read_pano, read_truth
     from holoflow.geometry.sampling import resize_pano
     from holoflow.io.exr import write_exr
 

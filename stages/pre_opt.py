@@ -10,7 +10,7 @@ def main() -> int:
     job.torch_threads(1)          # small tensors here; the numba kernels use job.cpus threads
     from holoflow.io.ply import read_points
     from holoflow.recon.config import PreOptParams
-    from holoflow.recon.schedule import cloud_footprint, pre_optimize, save_result
+    from holoflow.recon.optimize import cloud_footprint, pre_optimize, save_result
     from holoflow.recon.views import load_view_set
 
     cfg = job.config(PreOptParams)

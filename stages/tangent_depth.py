@@ -17,7 +17,7 @@ def main() -> int:
 
     from holoflow.depth import panorama as pd
     from holoflow.depth.config import TangentDepthParams
-    from holoflow.depth.io import read_pano, read_truth
+    from holoflow.depth.inputs import read_pano, read_truth
     from holoflow.geometry.sampling import resize_pano
     from holoflow.io.exr import write_exr
 

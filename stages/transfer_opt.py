@@ -18,7 +18,7 @@ def main() -> int:
     from holoflow.recon.colour_fit import fit_colours, polar_weights, viewing_views
     from holoflow.recon.config import TransferOptParams
     from holoflow.recon.preview import write_previews
-    from holoflow.recon.schedule import cloud_footprint, save_result, transfer_optimize
+    from holoflow.recon.optimize import cloud_footprint, save_result, transfer_optimize
     from holoflow.recon.views import load_view_set
 
     cfg = job.config(TransferOptParams)

@@ -5,7 +5,7 @@ AbsRel / RMSE / delta1 of the final metric depth for (a) naive per-face median s
 offset per face, (c) the grid alignment, plus the "oracle" AbsRel (best global scale + offset fitted on
 the truth itself: the alignment alone, without the metric engine's error).
 Table 2 + plot: accuracy against wall time over face size x grid size (2 scenes).
-Writes docs/depth-bench.md and docs/images/depth_sweep.png. Measured on this machine; times include the
+Writes docs/bench-depth.md and docs/images/depth_sweep.png. Measured on this machine; times include the
 engine, overlaps, solve and blending of tangent_depth plus metric_align.
 """
 from __future__ import annotations
@@ -56,7 +56,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--sweep-faces", default="32,64,128")
     ap.add_argument("--sweep-grids", default="2x2,4x4,8x7")
-    ap.add_argument("--out", default="docs", help="folder for depth-bench.md (images/ beneath it)")
+    ap.add_argument("--out", default="docs", help="folder for bench-depth.md (images/ beneath it)")
     ap.add_argument("--skip-sweep", action="store_true")
     args = ap.parse_args(argv)
     grid = tuple(int(v) for v in args.grid.lower().split("x"))
@@ -130,8 +130,8 @@ def main(argv: list[str]) -> int:
         text += ["## Accuracy against time (grid alignment; mean of 1 indoor + 1 outdoor scene)", "",
                  "| face size | grid | AbsRel | delta1 | s |", "|---|---|---|---|---|", *sweep_rows, "",
                  "![accuracy vs time](images/depth_sweep.png)", ""]
-    (out / "depth-bench.md").write_text("\n".join(text))
-    print(f"wrote {out / 'depth-bench.md'}")
+    (out / "bench-depth.md").write_text("\n".join(text))
+    print(f"wrote {out / 'bench-depth.md'}")
     return 0
 
 

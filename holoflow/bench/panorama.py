@@ -3,7 +3,7 @@
 For each prompt: procedural base_pano -> classical stylize (lineart + style) -> Lanczos upscale ->
 classical detail, at the preview profile's sizes (and, with --paper, the paper profile's sizes), timing
 each engine (wall and CPU seconds, in this process, torch on one thread as the stage sets it). Writes
-small PNG previews of every stage to docs/images/ and the timing table to docs/panorama-bench.md,
+small PNG previews of every stage to docs/images/ and the timing table to docs/bench-panorama.md,
 naming the machine. A contact sheet shows a dozen prompts' base panoramas side by side.
 """
 from __future__ import annotations
@@ -119,6 +119,6 @@ def main(argv: list[str]) -> int:
         for stage, (wall, cpu) in times.items():
             w, h = SIZES[stage][0 if profile == "preview" else 1]
             lines.append(f"| {profile} | {prompt} | {stage} ({engines[stage]}) | {w}x{h} | {wall:.2f} | {cpu:.2f} |")
-    (docs / "panorama-bench.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {docs / 'panorama-bench.md'} and previews in {images_dir}")
+    (docs / "bench-panorama.md").write_text("\n".join(lines) + "\n")
+    print(f"wrote {docs / 'bench-panorama.md'} and previews in {images_dir}")
     return 0

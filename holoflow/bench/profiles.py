@@ -4,7 +4,7 @@ where people look (issue 31).
 Each named profile runs, through the real runner into one shared store, on procedural scenes (a
 prompt each; the source is the detail panorama, and novel views have truth) and on the photos of a
 folder (``holoflow run PHOTO_PROMPT --use base_pano=PHOTO``; the source is the photo itself). Each
-finished run is scored by ``holoflow.evaluation.viewing.score_run`` at the viewing size (default 512 px at
+finished run is scored by ``holoflow.evaluation.viewing_size.score_run`` at the viewing size (default 512 px at
 the paper's 47.43 deg) and timed by its stages' run records (wall and CPU seconds of computing each
 stage, also when served from the cache: what a fresh run costs). A profile the pipeline does not
 define, or one that needs a GPU or model weights absent here, is skipped with a line saying why:
@@ -100,7 +100,7 @@ def measure(case: Case, profile: str, args) -> tuple[dict, dict, dict]:
     (row of figures, scores, pictures)."""
     from holoflow.evaluation.runs import run_pipeline
     from holoflow.flow.store import Store
-    from holoflow.evaluation.viewing import ViewingSpec, score_run
+    from holoflow.evaluation.viewing_size import ViewingSpec, score_run
 
     t0 = time.monotonic()
     load = os.getloadavg()[0]
@@ -127,8 +127,8 @@ def measure(case: Case, profile: str, args) -> tuple[dict, dict, dict]:
 
 
 def goal_marks(row: dict) -> str:
-    """The goals of the row's profile (holoflow.evaluation.viewing.GOALS) that it misses, or 'all met'."""
-    from holoflow.evaluation.viewing import goals_for
+    """The goals of the row's profile (holoflow.evaluation.viewing_size.GOALS) that it misses, or 'all met'."""
+    from holoflow.evaluation.viewing_size import goals_for
 
     _, g = goals_for(row["profile"])
     checks = {"psnr": (row["psnr"], False), "brisque": (row["brisque"], True), "niqe": (row["niqe"], True),
@@ -146,7 +146,7 @@ def _f(x, fmt: str = "{:.2f}") -> str:
 def markdown(rows: list[dict], skipped: list[str], notes: list[str], args, machine: str,
              pictures: dict[str, tuple[str, str]]) -> str:
     """The generated block: the table, the goals, the skipped profiles and links to the pictures."""
-    from holoflow.evaluation.viewing import GOALS
+    from holoflow.evaluation.viewing_size import GOALS
 
     head = ("| input | profile | fresh run s (CPU s) | base PSNR dB (pooled) | SSIM | zenith/nadir gap dB | NIQE x | "
             "BRISQUE x | empty 0.25 / 0.5 / 1 m % | novel PSNR 0.5 m | Gaussians | goals |")
@@ -207,7 +207,7 @@ def main(args) -> int:
     from holoflow.evaluation.machine import machine
     from holoflow.flow import pipeline
     from holoflow.report.pictures import encode
-    from holoflow.report.viewing import base_picture, novel_picture
+    from holoflow.report.viewing_section import base_picture, novel_picture
 
     pipe = pipeline.load(ROOT / "pipeline.yaml")
     profiles = [p for p in args.profiles.split(",") if p]

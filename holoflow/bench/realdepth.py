@@ -65,7 +65,7 @@ def run_pipeline(store: Path, prompt: str, extra: list[str]) -> tuple[np.ndarray
 def detail_input(store: Path, width: int) -> np.ndarray:
     """The latest run's detail panorama (linear RGB [H, W, 3]) resized to ``width``: what the depth
     engines receive."""
-    from holoflow.depth.io import read_pano
+    from holoflow.depth.inputs import read_pano
     from holoflow.geometry.sampling import resize_pano
     from holoflow.flow.store import Store
 
@@ -84,9 +84,9 @@ def read_truth(path: Path) -> tuple[np.ndarray, str]:
 
 
 def score(depth: np.ndarray, truth: np.ndarray, scale: str) -> dict:
-    """AbsRel / RMSE / delta1 (holoflow.depth.metrics) of a prediction against a truth of ``scale``."""
+    """AbsRel / RMSE / delta1 (holoflow.depth.accuracy) of a prediction against a truth of ``scale``."""
     from holoflow.depth.panorama import resize_radial
-    from holoflow.depth.metrics import depth_metrics
+    from holoflow.depth.accuracy import depth_metrics
 
     t = resize_radial(np.where(np.isnan(truth), 0.0, truth), *depth.shape)  # NaN -> 0: left out
     fit = 1.0

@@ -47,8 +47,8 @@ def run_one(n: int, size: int, repeat: int, ref_mem_gb: float, threads: int | No
     import torch
 
     from holoflow.splat import rasterize
-    from holoflow.splat.cpu import count_pairs
-    from holoflow.splat.cpu_project import project_cpu
+    from holoflow.splat.composite_cpu import count_pairs
+    from holoflow.splat.project_cpu import project_cpu
     from holoflow.splat.synthetic import intrinsics, look_at, room_scene, surface_scene
 
     if threads:

@@ -16,7 +16,7 @@ true appearance up to resampling) and scores G0 (pre_opt) and G1 (transfer_opt):
 
 ``--run RUN`` (a run id or ``latest``) scores any finished run, procedural or a user's own panorama
 (``holoflow run ... --use base_pano=photo.jpg``), at the viewing size (default 512 px at the paper's
-47.43 deg; holoflow.evaluation.viewing): the final scene at the base cameras against the source's own
+47.43 deg; holoflow.evaluation.viewing_size): the final scene at the base cameras against the source's own
 views (the photo itself for a photo), the zenith / nadir cameras apart, NIQE / BRISQUE ratios render /
 source, and the empty fraction of novel cameras 0.25 / 0.5 / 1 m off centre, beside issue 31's goals.
 
@@ -136,10 +136,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def main_run(args) -> int:
-    """``holoflow eval --run RUN``: score one finished run at the viewing size (holoflow.evaluation.viewing:
+    """``holoflow eval --run RUN``: score one finished run at the viewing size (holoflow.evaluation.viewing_size:
     base cameras vs the source's own views, zenith / nadir, NIQE / BRISQUE ratios, novel cameras'
     empty fraction), print the table with issue 31's goals (and with --json write every number)."""
-    from holoflow.evaluation.viewing import ViewingSpec, score_run, table
+    from holoflow.evaluation.viewing_size import ViewingSpec, score_run, table
 
     st = open_store(args.store)
     run_id = st.latest_run_id() if args.run == "latest" else args.run

@@ -29,7 +29,7 @@ def main(argv: list[str]) -> int:
         if s.get("engine"):
             why = f"{engine_note({'engine': s['engine']['ran'], 'why': s['engine']['why']})}; {why}"
         print(f"{name:<{width}}  {s['state']:<7}  {why}".rstrip())
-    from holoflow.flow.executors.cpu import bytes_note
+    from holoflow.flow.executors.step_env import bytes_note
 
     if note := bytes_note(kinds):
         print(note, file=sys.stderr)              # a note, not a row of the table
@@ -38,7 +38,7 @@ def main(argv: list[str]) -> int:
 
 def cpu_kinds(store, st: dict) -> dict[str, list[str]]:
     """{CPU kind: [stage]} of the fresh steps' records ('' for records without one)."""
-    from holoflow.flow.executors.cpu import cpu_kind
+    from holoflow.flow.executors.step_env import cpu_kind
 
     kinds: dict[str, list[str]] = {}
     for name, s in st.items():

@@ -1,11 +1,11 @@
 """Running the pipeline for one evaluated scene (served from the store when cached) and reading which
 engines made a run's depth. The project is the checkout holding the holoflow package
-(holoflow.flow.imports.HOLOFLOW_ROOT): its pipeline.yaml, and artifacts/ unless a store is given."""
+(holoflow.flow.code_closure.HOLOFLOW_ROOT): its pipeline.yaml, and artifacts/ unless a store is given."""
 from __future__ import annotations
 
 from pathlib import Path
 
-from holoflow.flow.imports import HOLOFLOW_ROOT
+from holoflow.flow.code_closure import HOLOFLOW_ROOT
 
 
 DEPTH_STAGES = ("base_pano", "tangent_depth", "metric_align")

@@ -15,7 +15,7 @@ def score(model, viewmats, K, targets, backend: str, hidden=None) -> tuple[dict,
     centre) also ``hidden_psnr`` (PSNR over those pixels only, pooled), ``hidden_frac`` (their share)
     and ``hidden_empty``. Returns (scores, renders [C, H, W, 3])."""
     from holoflow.quality import metrics
-    from holoflow.recon.schedule import render_views
+    from holoflow.recon.optimize import render_views
 
     views = [dict(image=t, viewmat=vm, K=K) for t, vm in zip(targets, viewmats)]
     rgb, alpha = render_views(model, views, backend)
@@ -35,7 +35,7 @@ def nr_scores(model, viewmats, K, size: int, backend: str) -> dict:
     import torch
 
     from holoflow.quality import metrics, nriqa
-    from holoflow.recon.schedule import render_views
+    from holoflow.recon.optimize import render_views
 
     Ks = square_K(K, size).float()
     blank = torch.zeros(size, size, 3)

@@ -2,7 +2,7 @@
 
 key = sha256(canonical JSON of {stage, code, engine, params, inputs, seed[, prompt]}) where
 - ``code`` maps each source file to its digest: the stage program, every project file it imports
-  (its import closure, holoflow/flow/imports.py), and the files under the stage's ``code:`` paths; named
+  (its import closure, holoflow/flow/code_closure.py), and the files under the stage's ``code:`` paths; named
   relative to pipeline.yaml's folder (a file outside it: relative to its search root, e.g.
   holoflow/stage.py). A ``.py`` file is hashed through its AST, so comments and formatting do not
   invalidate the cache; other files by their bytes. Digests and import lists are cached by
@@ -68,7 +68,7 @@ class CodeHasher:
         return out
 
     def closure(self, program: Path) -> dict[str, str]:
-        """{name: digest} of ``program`` and every project file it imports (holoflow/flow/imports.py)."""
+        """{name: digest} of ``program`` and every project file it imports (holoflow/flow/code_closure.py)."""
         prog = str(program)
         out = {self._relative(prog, None): self.digest(prog)}
         if not prog.endswith(".py"):

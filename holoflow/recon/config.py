@@ -15,7 +15,7 @@ _SPLAT_ENGINES = Engines("rasterize(..., backend=ENGINE): the rasterizer every t
 
 @dataclass(frozen=True)
 class OptimParams(StageParams):
-    """What both optimisation schedules share (holoflow/recon/schedule.py)."""
+    """What both optimisation schedules share (holoflow/recon/optimize.py)."""
 
     init_opacity: float = param(0.99, "opacity of the Gaussians made from P_f (3DGS: 0.1; footprint-sized "
                                 "Gaussians of a surface render the panorama as they start at 0.99)", gt=0, lt=1)

@@ -23,8 +23,8 @@ from holoflow.io.exr import read_exr, write_rgb
 
 
 def read_cameras(folder: str | Path) -> dict:
-    """``cameras.json`` of a view-set folder (docs/artifacts.md), via holoflow.geometry.export."""
-    from holoflow.geometry.export import read_cameras as _read
+    """``cameras.json`` of a view-set folder (docs/artifacts.md), via holoflow.geometry.camera_files."""
+    from holoflow.geometry.camera_files import read_cameras as _read
 
     return _read(Path(folder) / "cameras.json")
 
@@ -80,7 +80,7 @@ def write_view_set(folder: str | Path, cams: dict, images_srgb: np.ndarray, alph
                    stage: str) -> None:
     """Write a view set: one EXR per camera of ``cams`` (same order; see ``write_images``), plus
     cameras.json and a nerfstudio transforms.json."""
-    from holoflow.geometry.export import write_cameras, write_transforms
+    from holoflow.geometry.camera_files import write_cameras, write_transforms
 
     folder = Path(folder)
     write_images(folder, [v["file"] for v in cams["views"]], images_srgb, alpha, stage)

@@ -19,7 +19,7 @@ from holoflow.report.runinfo import ReportError, RunInfo, collect
 
 def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str:
     """The report page of ``run`` as HTML text; with ``view_size`` > 0 and a final scene, a first
-    section scores it at that viewing size (holoflow.report.viewing)."""
+    section scores it at that viewing size (holoflow.report.viewing_section)."""
     from holoflow.report import clouds as cl
     from holoflow.report import figures as fg
     from holoflow.report import page
@@ -40,8 +40,8 @@ def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str
     scene = run.run_dir / "transfer_opt" / "scene.ply"
     if view_size > 0 and scene.is_file():
         from holoflow.flow.store import read_json
-        from holoflow.evaluation.viewing import ViewingSpec, score_run
-        from holoflow.report.viewing import section_html
+        from holoflow.evaluation.viewing_size import ViewingSpec, score_run
+        from holoflow.report.viewing_section import section_html
 
         info = read_json(run.run_dir / "run.json") or {}
         scores, pictures = score_run(run.run_dir, info, ViewingSpec(size=view_size))

@@ -41,8 +41,8 @@ def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor,
         raise ValueError(f"rasterize: backend 'cpu' needs CPU tensors, got {means.device}")
     C, N = viewmats.shape[0], means.shape[0]
     if backend == "cpu":
-        from holoflow.splat.cpu import composite_cpu
-        from holoflow.splat.cpu_project import project_cpu
+        from holoflow.splat.composite_cpu import composite_cpu
+        from holoflow.splat.project_cpu import project_cpu
 
         proj = project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, near, far)
         gid, start = proj["gaussian_ids"], proj["camera_start"].tolist()
@@ -179,7 +179,7 @@ def compile_ahead() -> None:
     are left to their first use. holoflow/flow/executors/ahead.py."""
     import numpy as np
 
-    from holoflow.splat import cpu, cpu_project as cp
+    from holoflow.splat import composite_cpu as cpu, project_cpu as cp
     from holoflow.splat.synthetic import intrinsics, surface_scene
 
     f4, f8, i8 = (lambda *shape, dt=dt: np.zeros(shape, dt) for dt in (np.float32, np.float64, np.int64))

@@ -117,6 +117,16 @@ def test_nothing_below_imports_the_commands():
     assert not wrong, sorted(wrong)
 
 
+TOOLS = ["holoflow.bench", "holoflow.commands", "holoflow.evaluation", "holoflow.report"]
+DOMAIN = ["holoflow.scene", "holoflow.imageops", "holoflow.depth", "holoflow.geometry", "holoflow.splat",
+          "holoflow.recon", "holoflow.export", "holoflow.networks", "holoflow.quality", "holoflow.io"]
+
+
+def test_no_domain_package_imports_a_tool_package():
+    wrong = {(m, d) for m, deps in _graph().items() if _within(m, DOMAIN) for d in deps if _within(d, TOOLS)}
+    assert not wrong, sorted(wrong)
+
+
 def test_only_the_public_faces_at_the_package_root():
     assert {f.stem for f in PACKAGE.glob("*.py")} == ROOT_MODULES
 

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from holoflow.depth import panorama as pd
-from holoflow.depth.align import align_faces
+from holoflow.depth.face_alignment import align_faces
 from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 from holoflow.depth.engines import layout_radial_depth, simulated_relative
 from holoflow.depth.faces import face_rays, find_overlaps
-from holoflow.depth.metric import disparity_to_depth, robust_affine_fit, sky_mixed_edges
-from holoflow.depth.metrics import depth_metrics
+from holoflow.depth.metric_alignment import disparity_to_depth, robust_affine_fit, sky_mixed_edges
+from holoflow.depth.accuracy import depth_metrics
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -22,7 +22,7 @@ def test_forced_reruns_beside_cpu_hogs_give_identical_bytes(two_runs):
 def test_records_name_the_cpu_kind_and_the_pinned_paths(two_runs):
     import json
 
-    from holoflow.flow.executors.cpu import PINNED_ENV, cpu_facts
+    from holoflow.flow.executors.step_env import PINNED_ENV, cpu_facts
 
     store, _, _ = two_runs
     recs = [json.loads(p.read_text()) for p in (store / "keys").glob("*.json")]

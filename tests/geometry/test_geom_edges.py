@@ -73,7 +73,7 @@ def test_box_with_ramped_depth_off_centre(ramp, eye_m, snap, slope, holes):
     centre (the layer's baseline is 1 m), looking past the box. The stage's defaults (ramps snapped,
     no slope) leave no pixel empty; kept ramps start the layer at their intermediate depths, and a
     slope taken across a wide ramp throws the layer off the wall: holes open."""
-    from holoflow.recon.schedule import init_model
+    from holoflow.recon.optimize import init_model
     from holoflow.splat import render
 
     H, W = 128, 256

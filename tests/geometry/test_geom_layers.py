@@ -145,7 +145,7 @@ def test_box_scene_after_a_tiny_optimisation(with_layer):
     the layer; without it a good part of them stays empty (training from the centre cannot fill them)."""
     from holoflow.geometry.rigs import base_rig
     from holoflow.geometry.sampling import equirect_to_pinhole
-    from holoflow.recon.schedule import init_model
+    from holoflow.recon.optimize import init_model
     from holoflow.splat import TrainConfig, render, train
 
     H, W = 64, 128

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from holoflow.geometry.export import cameras_tensors, read_cameras, read_transforms
+from holoflow.geometry.camera_files import cameras_tensors, read_cameras, read_transforms
 from holoflow.io.exr import read_exr, write_exr, write_rgb
 from holoflow.io.ply import read_points
 

@@ -15,7 +15,7 @@ from holoflow.geometry.pointcloud import equirect_to_points
 from holoflow.geometry.rigs import base_rig
 from holoflow.geometry.sphere import lonlat_to_direction
 from holoflow.recon.config import TransferOptParams
-from holoflow.recon.schedule import init_model
+from holoflow.recon.optimize import init_model
 from holoflow.splat import render
 from holoflow.splat.project import EPS2D
 

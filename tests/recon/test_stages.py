@@ -13,7 +13,7 @@ import synth
 from holoflow.quality import metrics
 from holoflow.io.exr import read_exr
 from holoflow.io.ply import read_points
-from holoflow.recon.schedule import panorama_extent, render_views
+from holoflow.recon.optimize import panorama_extent, render_views
 
 ROOT = Path(__file__).resolve().parents[2]
 SIZE = 24
@@ -217,7 +217,7 @@ def test_inp_set_lama_without_weights_is_one_line_error(chain, tmp_path):
 def test_densification_stops_at_densify_stop(iters, stop, steps):
     """Densify at densify_from < step <= min(densify_stop x iters, iters - densify_every)."""
     from holoflow.recon.config import PreOptParams
-    from holoflow.recon.schedule import train_config
+    from holoflow.recon.optimize import train_config
 
     cfg = train_config(iters, PreOptParams(densify_every=50, densify_from=40, densify_stop=stop), "cpu")
     got = [it for it in range(1, iters + 1)
@@ -232,7 +232,7 @@ def test_train_seed_gives_an_independent_optimisation_and_zero_keeps_the_old_dra
     view order, so `holoflow eval --repeats` measures training noise on unchanged inputs."""
     from holoflow.geometry.camera import intrinsics_from_fov, look_at
     from holoflow.recon.config import PreOptParams
-    from holoflow.recon.schedule import TRAIN_SEED_STRIDE, init_model, run_phases
+    from holoflow.recon.optimize import TRAIN_SEED_STRIDE, init_model, run_phases
 
     g = torch.Generator().manual_seed(0)
     xyz = (torch.rand(200, 3, generator=g) * 2 - 1).numpy() + np.array([0, 0, 4], np.float32)
@@ -262,7 +262,7 @@ def test_lr_decay_runs_once_over_the_model_or_per_phase(decay, offsets, spans):
     band schedule; phase (the preview default): each phase decays afresh over its own steps."""
     from holoflow.geometry.camera import intrinsics_from_fov, look_at
     from holoflow.recon.config import PreOptParams
-    from holoflow.recon.schedule import init_model, run_phases
+    from holoflow.recon.optimize import init_model, run_phases
 
     g = torch.Generator().manual_seed(0)
     xyz = (torch.rand(50, 3, generator=g) * 2 - 1).numpy() + np.array([0, 0, 4], np.float32)

@@ -1,11 +1,11 @@
-"""holoflow.evaluation.viewing: the viewing-size scorer (issue 31) on cases whose answer is known."""
+"""holoflow.evaluation.viewing_size: the viewing-size scorer (issue 31) on cases whose answer is known."""
 import math
 
 import numpy as np
 import pytest
 import torch
 
-from holoflow.evaluation import viewing
+from holoflow.evaluation import viewing_size as viewing
 
 
 def smooth_pano(h: int = 64, w: int = 128, seed: int = 0, cells: int = 6) -> torch.Tensor:

@@ -73,7 +73,7 @@ def test_moving_mean_matches_a_loop():
 def test_viewing_pictures_pick_the_worst_median_zenith_and_nadir():
     import torch
 
-    from holoflow.report import viewing
+    from holoflow.report import viewing_section as viewing
 
     scores = {"base": {"per_camera_psnr": [20.0, 30.0, 25.0, 28.0, 22.0, 18.0],
                        "polar": [True, False, False, False, False, True],

@@ -37,8 +37,8 @@ ahead = kernels()
 
 from holoflow.geometry.layers import background_layer
 from holoflow.geometry.pointcloud import project_points_zbuffer
-from holoflow.splat.cpu import PARALLEL_MIN_GAUSSIANS
-from holoflow.splat.cpu_project import PARALLEL_MIN_WORK
+from holoflow.splat.composite_cpu import PARALLEL_MIN_GAUSSIANS
+from holoflow.splat.project_cpu import PARALLEL_MIN_WORK
 from holoflow.splat.model import GaussianModel
 from holoflow.splat.rasterize import render
 from holoflow.splat.synthetic import intrinsics, surface_scene
@@ -60,14 +60,14 @@ json.dump({"ahead": ahead, "after": kernels()}, sys.stdout)
 
 # called from Python (the others are helpers compiled inside their callers); the serial twins run
 # for views and clouds below the parallel thresholds only, compile_ahead leaves them to first use
-ENTRY = ["holoflow.splat.cpu." + k for k in ("_boxes", "_bin_tiles", "_forward", "_backward", "_gather_grads",
+ENTRY = ["holoflow.splat.composite_cpu." + k for k in ("_boxes", "_bin_tiles", "_forward", "_backward", "_gather_grads",
                                              "_boxes_serial", "_bin_tiles_serial")] + \
-        ["holoflow.splat.cpu_project." + k for k in ("_project_test", "_count_chunks", "_project_write",
+        ["holoflow.splat.project_cpu." + k for k in ("_project_test", "_count_chunks", "_project_write",
                                                      "_project_bwd_pairs", "_project_bwd_params")] + \
         ["holoflow.geometry.zbuffer_cpu.zbuffer", "holoflow.geometry.layers._grow", "holoflow.recon.inpaint._walk"]
-LEFT = ["holoflow.splat.cpu._forward_serial", "holoflow.splat.cpu._backward_serial",
-        "holoflow.splat.cpu._gather_grads_serial"] + \
-       ["holoflow.splat.cpu_project." + k + "_serial" for k in ("_project_test", "_count_chunks", "_project_write",
+LEFT = ["holoflow.splat.composite_cpu._forward_serial", "holoflow.splat.composite_cpu._backward_serial",
+        "holoflow.splat.composite_cpu._gather_grads_serial"] + \
+       ["holoflow.splat.project_cpu." + k + "_serial" for k in ("_project_test", "_count_chunks", "_project_write",
                                                                 "_project_bwd_pairs", "_project_bwd_params")]
 
 
@@ -85,8 +85,8 @@ def hook_files() -> list[str]:
 
 def test_every_kernel_file_is_compiled_ahead():
     # the splatting kernels (cpu.py, cpu_project.py) are compiled by rasterize's compile_ahead
-    assert set(kernel_files()) - set(hook_files()) == {"holoflow/splat/cpu.py",
-                                                       "holoflow/splat/cpu_project.py"}
+    assert set(kernel_files()) - set(hook_files()) == {"holoflow/splat/composite_cpu.py",
+                                                       "holoflow/splat/project_cpu.py"}
     assert set(hook_files()) - set(kernel_files()) == {"holoflow/splat/rasterize.py"}
 
 

@@ -108,7 +108,7 @@ def test_deterministic():
 def test_packed_projection_parallel_equals_serial(monkeypatch):
     # several chunks of Gaussians, three cameras: the parallel passes place every pair where the serial
     # ones do, and the backward sums each Gaussian's cameras in the same order: exact on any CPU
-    from holoflow.splat import cpu_project as cp
+    from holoflow.splat import project_cpu as cp
 
     n = 2 * cp.CHUNK + 300
     p = random_scene(n, 9, torch.float32)
@@ -132,7 +132,7 @@ def test_tile_binning_is_the_same_for_any_chunk_count(chunks):
     """The parallel counting sort gives the serial one's lists: per tile ascending packed index."""
     import numpy as np
 
-    from holoflow.splat import cpu
+    from holoflow.splat import composite_cpu as cpu
 
     g = np.random.default_rng(chunks)
     N, W, H = 500, 70, 45
@@ -294,7 +294,7 @@ def test_fast_matches_reference_when_most_gaussians_are_out_of_view(dtype):
 def test_fast_projection_draws_what_the_reference_tests_draw(dtype):
     # project_cpu skips the covariance of Gaussians that a cheap bound puts off the image; large ones
     # centred outside the view whose reach enters it must still be drawn, in every camera.
-    from holoflow.splat.cpu_project import project_cpu
+    from holoflow.splat.project_cpu import project_cpu
     from holoflow.splat.project import pixel_extent, project_gaussians
 
     p = {k: v.detach() for k, v in random_scene(600, 11, dtype).items()}

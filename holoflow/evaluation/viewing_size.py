@@ -93,7 +93,7 @@ def render_at(model, viewmats: torch.Tensor, K: torch.Tensor, size: int, backend
               ) -> tuple[torch.Tensor, torch.Tensor]:
     """A Gaussian model rendered at cameras viewmats [C, 4, 4], K [3, 3], size x size px:
     (sRGB [C, size, size, 3] clamped to [0, 1], alpha [C, size, size])."""
-    from holoflow.recon.schedule import render_views
+    from holoflow.recon.optimize import render_views
 
     blank = torch.zeros(size, size, 3)
     rgb, alpha = render_views(model, [dict(image=blank, viewmat=vm, K=K) for vm in viewmats], backend)

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from numba import njit, prange
 
-from holoflow.splat.cpu import serial_twin
+from holoflow.splat.composite_cpu import serial_twin
 from holoflow.splat.project import ALPHA_MIN, EPS2D
 
 

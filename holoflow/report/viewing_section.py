@@ -1,4 +1,4 @@
-"""Pictures and the report section of the viewing-size scores (holoflow.evaluation.viewing), so the eye can
+"""Pictures and the report section of the viewing-size scores (holoflow.evaluation.viewing_size), so the eye can
 check the numbers: source | render crops at the viewing size, and the novel views with their holes.
 
 Pure functions of ``score_run``'s (scores, pictures); images are uint8 [H, W, 3] sRGB.
@@ -37,7 +37,7 @@ def crop(img: np.ndarray, side: int) -> np.ndarray:
 def base_picture(scores: dict, pictures: dict, side: int = 256) -> tuple[np.ndarray, str]:
     """Rows source | render of the ``pick_base`` cameras, each the centre ``side`` px of the view at
     1:1 (the viewing size's own pixels), and a caption naming the rows."""
-    from holoflow.evaluation.viewing import to_uint8
+    from holoflow.evaluation.viewing_size import to_uint8
 
     src, ren = to_uint8(pictures["source"]), to_uint8(pictures["render"])
     rows, names = [], []
@@ -56,7 +56,7 @@ def base_picture(scores: dict, pictures: dict, side: int = 256) -> tuple[np.ndar
 def novel_picture(scores: dict, pictures: dict, distance: str = "0.5", side: int = 256) -> tuple[np.ndarray, str]:
     """The novel cameras of one distance (``novel_rig`` order), each fitted into ``side`` px, pixels
     with alpha below the threshold in magenta; a truth row above when the run has truth."""
-    from holoflow.evaluation.viewing import to_uint8
+    from holoflow.evaluation.viewing_size import to_uint8
     from holoflow.report.pictures import mosaic
 
     keys = list(scores["novel"])
@@ -81,7 +81,7 @@ def novel_picture(scores: dict, pictures: dict, distance: str = "0.5", side: int
 
 def section_html(scores: dict, pictures: dict, profile: str | None) -> str:
     """The report's "what people see" section: the table with goals and both pictures."""
-    from holoflow.evaluation.viewing import table
+    from holoflow.evaluation.viewing_size import table
     from holoflow.report.figures import Figure
     from holoflow.report.page import esc, figure_html
     from holoflow.report.pictures import image_uri
