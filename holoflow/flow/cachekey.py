@@ -24,7 +24,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from .imports import HOLOFLOW_ROOT, ImportGraph, parse_imports
+from .code_closure import HOLOFLOW_ROOT, ImportGraph, parse_imports
 from .store import canonical_json, sha256_bytes
 
 _SKIP_DIRS = {"__pycache__", ".git", ".pytest_cache", ".mypy_cache", ".ipynb_checkpoints"}

@@ -126,7 +126,7 @@ def import_cache(ctx: Context, source_sha: str, outputs: dict | None = None, fac
     the same input digests as the run and a rerun skips the decode. A lookup returns the outputs, or
     with ``facts=True`` {"outputs", "facts"} (None when the facts were not recorded); None when absent
     or when an output object has left the store (``holoflow gc``)."""
-    from .imports import HOLOFLOW_ROOT
+    from .code_closure import HOLOFLOW_ROOT
     from .store import canonical_json, sha256_bytes
 
     path = ctx.store.root / "cache" / "imports.json"

@@ -14,7 +14,7 @@ import queue
 import threading
 from typing import Any
 
-from ..imports import HOLOFLOW_ROOT
+from ..code_closure import HOLOFLOW_ROOT
 from . import ahead as ahead_mod
 from .task import StepTask, gpu_ids, host_memory_gb, step_env
 from .step import run_step

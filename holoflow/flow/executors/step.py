@@ -24,7 +24,7 @@ from holoflow import __version__
 from ..store import Store, remove_tree
 from .failure import exit_reason, store_problem
 from .task import StepTask, step_env
-from .cpu import PINNED_ENV, cpu_facts
+from .step_env import PINNED_ENV, cpu_facts
 
 LOG_TAIL = 15
 

@@ -42,7 +42,7 @@ def step_env(resources: dict[str, Any]) -> dict[str, str]:
     the same kernels. The same on every executor, so a step computes the same bytes under ``-j 1``,
     ``-j N`` and Ray.
     """
-    from .cpu import PINNED_ENV
+    from .step_env import PINNED_ENV
 
     n = str(max(1, min(int(resources.get("cpus", 1)), os.cpu_count() or 1)))
     env = {v: n for v in THREAD_VARS}

@@ -18,7 +18,7 @@ import subprocess
 import sys
 from types import SimpleNamespace
 
-from ..imports import HOLOFLOW_ROOT
+from ..code_closure import HOLOFLOW_ROOT
 from .step import popen
 
 #: third-party modules worth importing once per run (seconds each on a 2-core machine, for torch)
