@@ -3,7 +3,7 @@ local link and picture in the user docs exists."""
 import re
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_stage_param_tables_are_generated_from_the_param_classes():

@@ -47,7 +47,7 @@ def ssim_map(a: torch.Tensor, b: torch.Tensor, window_size: int = 11, max_val: f
     """Per-pixel SSIM [B, C, H, W] of images a, b [B, C, H, W] (channels first): Gaussian window
     (sigma 1.5 px, ``window_size`` taps, odd, < 2 min(H, W)), reflect padding, c1 = (0.01 L)^2,
     c2 = (0.03 L)^2 with L = ``max_val``, ``eps`` added to the denominator (kornia's definition;
-    tests/recon/test_metrics.py compares the two). Differentiable in both images.
+    tests/quality/test_metrics.py compares the two). Differentiable in both images.
 
     The five local moments (mu_a, mu_b, E[a^2], E[b^2], E[ab]) are filtered as one stacked tensor
     by two depthwise 1-D convolutions: 2 convolutions a call instead of 10, in the forward pass and in
@@ -72,7 +72,7 @@ def ssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11, max_va
     """Mean structural similarity (``ssim_map`` in float32, averaged in float64) of images
     [..., H, W, 3] in [0, max_val]. Windows are clipped to the image for images smaller than
     ``window_size``. float32 filtering is 11x faster than float64 on the CPU (38 views of 128 px:
-    0.17 vs 1.9 s) and moves the mean by about 1e-9 (tests/recon/test_metrics.py)."""
+    0.17 vs 1.9 s) and moves the mean by about 1e-9 (tests/quality/test_metrics.py)."""
     h, w = pred.shape[-3], pred.shape[-2]
     win = max(1, min(window_size, h, w))
     win -= 1 - win % 2                                                 # an odd window

@@ -82,7 +82,7 @@ def test_square_K_keeps_the_field_of_view():
 
 
 def test_nr_scores_are_finite_means_over_the_cameras_and_a_missing_model_is_reported(monkeypatch):
-    import synth
+    from tests.recon import synth
 
     from holoflow.quality import metrics, nriqa
     from holoflow.geometry.camera import intrinsics_from_fov

@@ -3,7 +3,7 @@ from pathlib import Path
 
 import pytest
 
-from faultkit import run_json
+from .faultkit import run_json
 
 
 @pytest.fixture(scope="session")

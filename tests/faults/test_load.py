@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from faultkit import ROOT, popen, run_json, verify_clean
+from .faultkit import ROOT, popen, run_json, verify_clean
 
 PROMPTS = ["a quiet library", "a sunny kitchen", "an old barn", "a snowy cabin"]
 REQUESTS = 10            # per viewer while the runs go

@@ -1,5 +1,5 @@
 """Ramp-drawn occlusion edges made steps (holoflow/geometry/edges.py): a ramp between a near and a far
-surface, smooth surfaces left alone, and the box before a wall (tests/geometry/test_geom_layers.py)
+surface, smooth surfaces left alone, and the box before a wall (tests/geometry/test_layers.py)
 with its depth blurred as an estimator draws it, seen off centre."""
 import math
 
@@ -13,7 +13,7 @@ from holoflow.geometry.layers import background_layer
 from holoflow.geometry.pointcloud import depth_gradient_mask, equirect_to_points
 from holoflow.recon.config import TransferOptParams
 
-from test_geom_layers import room_with_box     # the analytic box room (a sibling module, as tests/recon imports synth)
+from .test_layers import room_with_box     # the analytic box room
 
 
 def test_a_ramp_becomes_a_step_and_its_layer_lies_on_the_far_side():

@@ -13,9 +13,9 @@ from holoflow.geometry.camera_files import cameras_tensors, read_cameras, read_t
 from holoflow.io.exr import read_exr, write_exr, write_rgb
 from holoflow.io.ply import read_points
 
+from .test_pointcloud import rgbd_pano  # the analytic room + ball scene
+
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(Path(__file__).parent))
-from test_geom_pointcloud import rgbd_pano  # noqa: E402  (the analytic room + ball scene)
 
 
 def run_stage(tmp: Path, stage: str, params: dict, inputs: dict) -> subprocess.CompletedProcess:

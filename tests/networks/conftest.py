@@ -1,14 +1,11 @@
 """Fixtures for the real-model engine tests: tiny random models of the real architectures,
 saved to a temp dir once per session and loaded through each engine's own loading code."""
 import os
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 os.environ["HF_HUB_OFFLINE"] = "1"
-sys.path.insert(0, str(Path(__file__).parent))     # `from engine_checks import ...`
 
 
 @pytest.fixture(autouse=True)

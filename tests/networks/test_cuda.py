@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from engine_checks import seam_is_typical
+from .engine_checks import seam_is_typical
 
 pytestmark = [pytest.mark.models, pytest.mark.cuda,
               pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")]

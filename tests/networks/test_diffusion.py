@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from engine_checks import seam_is_typical
+from .engine_checks import seam_is_typical
 from holoflow.networks.circular import blend_overlap, decode_periodic, extend_periodic, overlap_columns
 
 pytestmark = pytest.mark.models

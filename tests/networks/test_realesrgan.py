@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from engine_checks import seam_is_typical
+from .engine_checks import seam_is_typical
 from holoflow.networks.realesrgan import rrdbnet_class, rrdbnet_from_state_dict, upscale, upscale_srgb
 from holoflow.networks.weights import MissingWeights
 

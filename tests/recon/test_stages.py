@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-import synth
+from . import synth
 from holoflow.quality import metrics
 from holoflow.io.exr import read_exr
 from holoflow.io.ply import read_points

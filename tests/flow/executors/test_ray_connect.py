@@ -19,8 +19,8 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-ROOT = Path(__file__).resolve().parents[2]
-TOY = ROOT / "tests" / "core" / "fixtures"
+ROOT = Path(__file__).resolve().parents[3]
+TOY = ROOT / "tests" / "flow" / "fixtures"
 pytestmark = pytest.mark.timeout(300)
 
 

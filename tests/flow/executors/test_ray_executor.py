@@ -14,7 +14,7 @@ from holoflow.commands import main                                    # noqa: E4
 from holoflow.flow.executors import StepTask                          # noqa: E402
 from holoflow.flow.store import Store                                 # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 # First attempt: kill itself (a step killed on a worker) or its parent (the Ray worker: a lost worker).
 KILL_ONCE = '''import os, signal
