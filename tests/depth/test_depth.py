@@ -365,10 +365,9 @@ def test_real_engines_dispatch_with_tiny_random_models(tmp_path, room_pano):
     zd = save_zoedepth(tmp_path / "zd")
     res = pd.estimate_disparity(rgb, None, "depth_anything", TangentDepthParams(face_size=16, grid=(2, 2), model=str(da)))
     assert res.engine["engine"] == "depth_anything" and np.isfinite(res.disparity).all()
-    try:
-        md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth",
-                                      MetricAlignParams(faces=2, face_size=16, model=str(zd)))
-    except ValueError as exc:  # a random network may give a disparity unrelated to its random metric depth
-        assert "scale" in str(exc) or "constant" in str(exc)
-    else:
-        assert md.engine["engine"] == "zoedepth" and not np.isnan(md.depth).any()
+    # the seeded random models (seed 0) give a disparity that grows with zoedepth's: a fit scale near 160
+    md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth",
+                                  MetricAlignParams(faces=2, face_size=16, model=str(zd)))
+    assert md.engine["engine"] == "zoedepth" and len(md.faces) == 2
+    assert md.fit["scale"] > 0 and md.depth.shape == res.disparity.shape
+    assert np.isfinite(md.depth).all() and (md.depth > 0).all()
