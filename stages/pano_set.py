@@ -20,7 +20,7 @@ def main() -> int:
     from holoflow.geometry.config import PanoSetParams
     from holoflow.geometry.camera_files import cameras_json, write_cameras, write_transforms
     from holoflow.geometry.rigs import base_rig, rig_coverage
-    from holoflow.geometry.sampling import equirect_to_pinhole
+    from holoflow.geometry.sampling import equirect_to_pinhole_batches
     from holoflow.io.exr import read_rgb, write_rgb
 
     cfg = job.config(PanoSetParams)
@@ -31,15 +31,11 @@ def main() -> int:
     viewmats = base_rig(count, cfg.rig, device=device, dtype=torch.float32)  # [M, 4, 4]
     names = [f"{i:03d}" for i in range(count)]
     files = [f"views/{n}.exr" for n in names]
-    chunk = 16  # views per call: the panorama is prefiltered once per call
-    for start in range(0, count, chunk):
-        stop = min(count, start + chunk)
-        views = equirect_to_pinhole(pano, K.expand(stop - start, 3, 3), viewmats[start:stop], size, size,
-                                    mode="antialias")  # [n, 3, size, size]
-        for i in range(start, stop):
-            write_rgb(job.output(files[i]), views[i - start].permute(1, 2, 0).cpu().numpy(),
+    for start, views in equirect_to_pinhole_batches(pano, K, viewmats, size, size):  # [n, 3, size, size]
+        for i, view in enumerate(views, start):
+            write_rgb(job.output(files[i]), view.permute(1, 2, 0).cpu().numpy(),
                       {"holoflow.stage": "pano_set", "holoflow.camera": names[i]})
-        job.progress(stop, count, "views")
+        job.progress(start + len(views), count, "views")
     cams = cameras_json(K, viewmats, size, size, names, files)
     write_cameras(job.output("cameras.json"), cams)
     write_transforms(job.output("transforms.json"), cams)

@@ -17,7 +17,7 @@ from holoflow.stage import Job, run_main
 def main() -> int:
     job = Job.from_argv()
     from holoflow.imageops.config import StylizeParams
-    from holoflow.imageops.photo import provenance, same_pixels, unaltered
+    from holoflow.imageops.photo import provenance, same_pixels, unaltered, unstyled_photo
     from holoflow.imageops.styles import requested_style
     from holoflow.io.exr import read_rgb_attrs, write_exr, write_rgb
 
@@ -25,13 +25,7 @@ def main() -> int:
     path = job.input_file("pano", "pano.exr")
     base, src = read_rgb_attrs(path)                                       # [H, W, 3] linear, header
     if unaltered(src) and requested_style(job.prompt, cfg.style) is None:            # the photo stays the photo
-        from holoflow.imageops.lineart import lineart
-        from holoflow.imageops.photo import keep_size
-        from holoflow.imageops.resize import lanczos_resize
-
-        h, w = keep_size(base.shape, cfg.width, cfg.height, cfg.max_width)
-        out = base if w >= base.shape[1] else lanczos_resize(base, w, h)             # wider than the cap: to it
-        lines, attrs, meta = lineart(out), {"holoflow.style": "none"}, {"style": "none (user's photo)"}
+        out, lines, attrs, meta = unstyled_photo(base, cfg.width, cfg.height, cfg.max_width)
     else:
         out, lines, attrs, meta = StylizeParams.ENGINES.get(job.engine)(base, job.prompt, cfg, job.seed,
                                                                        job.device, job.progress)

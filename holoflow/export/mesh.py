@@ -81,3 +81,19 @@ def rgbd_mesh(rgb: np.ndarray, radial_depth: np.ndarray, edge_threshold: float =
     used[faces.reshape(-1)] = True
     remap = np.cumsum(used) - 1
     return verts[used], cols[used], remap[faces].astype(np.int64)
+
+
+def panorama_mesh_glb(rgb: np.ndarray, radial_depth: np.ndarray, width: int = 0, edge_threshold: float = 0.4,
+                      sky: str = "dome", sky_radius: float = 0.0) -> tuple[bytes, dict]:
+    """mesh.glb's bytes and facts (grid, vertex and face counts) for a panorama: rgb [H, W, 3] linear,
+    radial_depth [h, w] metres (inf = sky), both resampled to ``width`` x ``width // 2`` (0 = half the
+    depth's width, P_f's resolution; colour antialiased, depth point-sampled), then :func:`rgbd_mesh`."""
+    from holoflow.export.gltf import mesh_glb_bytes
+    from holoflow.geometry.pointcloud import resample_rgbd
+
+    depth = torch.from_numpy(np.asarray(radial_depth)).double()
+    col, d = resample_rgbd(torch.from_numpy(np.asarray(rgb)).double(), depth, width or max(2, depth.shape[1] // 2))
+    verts, cols, faces = rgbd_mesh(col.clamp(0, 1).numpy(), d.numpy(), edge_threshold, sky, sky_radius)
+    info = {"mesh_grid": [int(d.shape[0]), int(d.shape[1])], "mesh_vertices": int(len(verts)),
+            "mesh_faces": int(len(faces))}
+    return mesh_glb_bytes(verts, cols, faces), info

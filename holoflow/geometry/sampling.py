@@ -198,6 +198,18 @@ def equirect_to_pinhole(pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tens
     return torch.cat(out, 0)
 
 
+def equirect_to_pinhole_batches(pano: torch.Tensor, K: torch.Tensor, viewmats: torch.Tensor, height: int,
+                                width: int, batch: int = 16, mode: str = "antialias"):
+    """:func:`equirect_to_pinhole` of a shared panorama [C, H, W] for M cameras (K [3, 3] or [M, 3, 3],
+    viewmats [M, 4, 4]), ``batch`` cameras per call (the panorama is prefiltered once per call) so only one
+    batch of views is held: yields (index of the batch's first camera, views [n, C, height, width])."""
+    M = viewmats.shape[0]
+    for start in range(0, M, batch):
+        stop = min(M, start + batch)
+        Kb = K[start:stop] if K.dim() == 3 else K.expand(stop - start, 3, 3)
+        yield start, equirect_to_pinhole(pano, Kb, viewmats[start:stop], height, width, mode=mode)
+
+
 def pinhole_to_equirect(images: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int,
                         weights: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Accumulate perspective views [B, C, h, w] onto an equirect grid: (accum [C, H, W], weight_sum [1, H, W]).

@@ -59,3 +59,16 @@ def keep_size(shape: tuple[int, ...], width: int, height: int, max_width: int) -
 def same_pixels(a: np.ndarray, b: np.ndarray) -> bool:
     """True when two panoramas hold the same values (shape and every element)."""
     return a.shape == b.shape and bool(np.array_equal(a, b))
+
+
+def unstyled_photo(photo: np.ndarray, width: int, height: int, max_width: int
+                   ) -> tuple[np.ndarray, np.ndarray, dict[str, Any], dict[str, Any]]:
+    """stylize for a user's photo with no style asked for, as a stylize engine returns it: the photo
+    [H, W, 3] linear at its own size (:func:`keep_size`; wider than ``max_width``: Lanczos-resized to it),
+    its XDoG lineart [h, w] (1 = line), header attributes and record facts."""
+    from holoflow.imageops.lineart import lineart
+    from holoflow.imageops.resize import lanczos_resize
+
+    h, w = keep_size(photo.shape, width, height, max_width)
+    out = photo if w >= photo.shape[1] else lanczos_resize(photo, w, h)
+    return out, lineart(out), {"holoflow.style": "none"}, {"style": "none (user's photo)"}

@@ -89,6 +89,15 @@ def read_rgb_attrs(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
     return np.stack([channels["R"], channels["G"], channels["B"]], axis=-1), attrs
 
 
+def read_radial_depth(path: str | Path) -> np.ndarray:
+    """Radial depth [H, W] float32 (metres, inf = sky) from an EXR's Z channel; ExrError when there is no Z
+    or the header's ``holoflow.depth_kind`` says it is not radial (unset reads as radial)."""
+    channels, attrs = read_exr(path)
+    if "Z" not in channels or attrs.get("holoflow.depth_kind", "radial") != "radial":
+        raise ExrError(f"{path}: no radial depth in channel Z (expected metric_align's depth.exr)")
+    return channels["Z"]
+
+
 def _encode_attr(value: Any) -> Any:
     if isinstance(value, (bool, np.bool_)):
         return int(value)

@@ -5,8 +5,9 @@ import pytest
 import torch
 
 from holoflow.geometry.camera import intrinsics_from_fov, look_at, pinhole_rays
-from holoflow.geometry.sampling import (equirect_to_pinhole, equirect_window, pad_equirect, pinhole_to_equirect,
-                                       resize_equirect, ring_prefilter, sample_equirect)
+from holoflow.geometry.sampling import (equirect_to_pinhole, equirect_to_pinhole_batches, equirect_window,
+                                       pad_equirect, pinhole_to_equirect, resize_equirect, ring_prefilter,
+                                       sample_equirect)
 from holoflow.geometry.sphere import direction_to_lonlat, equirect_directions, lonlat_to_equirect_pixel
 
 
@@ -271,3 +272,14 @@ def test_equirect_window_matches_definition(H, W):
             win = equirect_window(pano, r0, r1, c0, c1)
             assert win.is_contiguous()
             assert torch.equal(win, ref[:, r0 + pad:r1 + pad, c0 + pad:c1 + pad]), (r0, r1, c0, c1)
+
+
+@pytest.mark.parametrize("shared_K", [True, False])
+def test_e2p_in_batches_equals_one_call(shared_K):
+    pano = analytic_pano(32, 64, torch.float32, "cpu")
+    K, V = _cams(torch.float32, "cpu", size=16)                              # 6 cameras
+    K = K[0] if shared_K else K
+    batches = list(equirect_to_pinhole_batches(pano, K, V, 16, 16, batch=4))
+    assert [start for start, _ in batches] == [0, 4] and [len(v) for _, v in batches] == [4, 2]
+    whole = equirect_to_pinhole(pano, K.expand(6, 3, 3), V, 16, 16, mode="antialias")
+    assert torch.equal(torch.cat([v for _, v in batches]), whole)

@@ -75,3 +75,18 @@ def test_a_photo_wider_than_the_cap_is_resized_once_at_stylize(tmp_path):
 ])
 def test_keep_size(shape, size, cap, want):
     assert keep_size(shape, size[0], size[1], cap) == want
+
+
+def test_an_unstyled_photo_keeps_its_pixels_up_to_max_width():
+    from holoflow.imageops.lineart import lineart
+    from holoflow.imageops.photo import unstyled_photo
+
+    rng = np.random.default_rng(3)
+    photo = rng.random((32, 64, 3), dtype=np.float32)
+    out, lines, attrs, meta = unstyled_photo(photo, 32, 16, 128)            # wider than the stage: kept
+    assert out is photo and np.array_equal(lines, lineart(photo))
+    assert attrs == {"holoflow.style": "none"} and meta == {"style": "none (user's photo)"}
+    out, lines, _, _ = unstyled_photo(photo, 32, 16, 48)                    # wider than max_width: to it
+    assert out.shape == (24, 48, 3) and lines.shape == (24, 48)
+    out, _, _, _ = unstyled_photo(photo, 128, 64, 0)                        # narrower than the stage: kept too
+    assert out is photo

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from holoflow.io.exr import ExrError, read_exr, read_rgb, write_exr, write_rgb
+from holoflow.io.exr import ExrError, read_exr, read_radial_depth, read_rgb, write_exr, write_rgb
 from holoflow.io.ply import (PlyError, gaussian_fields, read_gaussians, read_points, write_gaussians,
                              write_points)
 
@@ -73,3 +73,16 @@ def test_gaussians_round_trip(tmp_path):
     assert not back["nx"].any()
     with pytest.raises(PlyError, match="missing"):
         write_gaussians(tmp_path / "h.ply", {"x": fields["x"]})
+
+
+def test_radial_depth_is_read_and_other_depth_kinds_are_refused(tmp_path):
+    z = np.array([[1.5, np.inf], [2.0, 3.0]], np.float32)
+    write_exr(tmp_path / "radial.exr", {"Z": z}, {"holoflow.depth_kind": "radial"})
+    write_exr(tmp_path / "unset.exr", {"Z": z})
+    write_exr(tmp_path / "disp.exr", {"Z": z}, {"holoflow.depth_kind": "disparity"})
+    write_exr(tmp_path / "noz.exr", {"Y": z})
+    assert read_radial_depth(tmp_path / "radial.exr").tobytes() == z.tobytes()
+    assert read_radial_depth(tmp_path / "unset.exr").tobytes() == z.tobytes()      # unset reads as radial
+    for name in ("disp.exr", "noz.exr"):
+        with pytest.raises(ExrError, match="no radial depth in channel Z"):
+            read_radial_depth(tmp_path / name)
