@@ -37,7 +37,6 @@ def dtype(request):
     return getattr(torch, request.param)
 
 
-
 class Project:
     """A copy of the toy pipeline with helpers to call `holoflow` in-process or as a process."""
 
