@@ -1,5 +1,5 @@
 """CPU kinds in records, the pinned BLAS / NumPy code paths of every step, the `status` bytes line."""
-from holoflow.flow.executors import step_env
+from holoflow.flow.executors.task import step_env       # the function (the package attribute may be the module)
 from holoflow.flow.executors.step_env import PINNED_ENV, bytes_note, cpu_facts, cpu_kind, isa_class
 
 V2 = {"cx16", "lahf_lm", "popcnt", "sse4_1", "sse4_2", "ssse3"}

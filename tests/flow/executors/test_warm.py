@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from holoflow.flow.executors import step_env
+from holoflow.flow.executors.task import step_env       # the function (the package attribute may be the module)
 from holoflow.flow.executors import warm
 from holoflow.flow.executors.warm import Launcher, first_use, preload, supported
 
