@@ -9,7 +9,7 @@ from holoflow.flow.params import Engines, StageParams, param
 
 @dataclass(frozen=True)
 class PointCloudParams(StageParams):
-    """Equirect RGB-D -> P0, P_f, P_s (holoflow/geometry/pointcloud.py)."""
+    """Equirect RGB-D -> P0, P_f, P_s (holoflow/geometry/clouds.py)."""
 
     ENGINES = Engines("one engine, the method: equirect_to_points(rgb [H, W, 3], radial depth [H, W]) per cloud",
                       default="holoflow.geometry.pointcloud:equirect_to_points")
@@ -54,6 +54,11 @@ class PointCloudParams(StageParams):
                               "smooth surface spanning less is never touched; pixels within layer_tol of "
                               "either end stay)", gt=0)
     edge_rounds: int = param(2, "edge_radius: passes (a ramp wider than the window needs two)", ge=1)
+    smooth_radius: int = param(3, "P_f: depth noise smoothed within each surface over a window this many px "
+                               "around each pixel, never across an edge (holoflow/geometry/surfaces.py); 0 = off",
+                               "px", ge=0)
+    smooth_range: float = param(0.05, "smooth_radius: relative depth difference at which a neighbour's weight "
+                                "falls to exp(-1/2) (steps of several times this are edges)", gt=0)
     layer_baseline: float = param(1.0, "P_f gets a background layer: the far surface (and the sky shell) "
                                   "continued under each silhouette as far as an eye move of this much uncovers "
                                   "(holoflow/geometry/layers.py); 0 = none", "m", ge=0)

@@ -32,6 +32,13 @@ class OptimParams(StageParams):
                                    "fraction of the point's footprint", gt=0)
     footprint_thickness: float = param(0.1, "init_scale footprint: standard deviation along the ray",
                                        "fraction of the point's footprint", gt=0)
+    footprint_orient: str = param("surface", "init_scale footprint: surface = each disc lies on its surface "
+                                  "(pf.ply's normals; the footprint seen from the centre projected onto it), so "
+                                  "neighbours overlap from eyes off the centre; centre = discs face the "
+                                  "panorama centre", choices=("surface", "centre"))
+    footprint_max_stretch: float = param(6.0, "footprint_orient surface: a disc is at most this many times "
+                                         "longer down a slanted surface than across (1 / cos(incidence))",
+                                         ge=1)
     densify_every: int = param(50, "split / clone every this many iterations (paper: 100)", "iters", ge=1)
     densify_from: int = param(40, "densify at densify_from < step <= densify_stop x iters (3DGS: from 500)",
                               "iters", ge=0)
