@@ -206,7 +206,8 @@ def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, caps:
 
 
 def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.6, thickness: float = 0.1,
-                        caps: PolarCaps | None = None, layer_points: int = 0, layer_spacing_rad: float = 0.0,
+                        caps: PolarCaps | None = None, layer_points: int = 0,
+                        layer_spacing_rad: float | torch.Tensor = 0.0,
                         low_pass_rad2: float = 0.0, normals: torch.Tensor | None = None,
                         max_stretch: float = 6.0) -> tuple[torch.Tensor, torch.Tensor]:
     """Scales [N, 3] (metres) and quaternions [N, 4] (w, x, y, z) of Gaussians at points xyz [N, 3]
@@ -214,7 +215,8 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
     deviation ``width`` x r spacing along the tangent axes, ``thickness`` x r spacing along the ray
     (local z turned onto the ray). r is clamped away from 0. Points in the ``caps`` use the caps'
     spacings instead: caps.ring_rad along the ring (local x turned east), caps.row_rad across it; the
-    last ``layer_points`` points (P_f's background layer, a sparser grid) ``layer_spacing_rad``.
+    last ``layer_points`` points (P_f's background layer and sky dome, sparser grids) ``layer_spacing_rad``
+    (one value, or one per such point [layer_points]).
 
     ``low_pass_rad2``: the variance the rasterizer adds to every disc at the viewing size (its 0.3 px^2
     times a view pixel's angle squared, radians^2 at unit distance). It is taken off each tangent
@@ -230,7 +232,8 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
     r = torch.linalg.vector_norm(xyz, dim=-1).clamp_min(1e-9)                   # [N]
     d = xyz / r[:, None]
     layer = torch.arange(len(r), device=r.device) >= len(r) - layer_points
-    across = torch.where(layer, layer_spacing_rad, spacing_rad).to(r.dtype)
+    tail = torch.as_tensor(layer_spacing_rad, dtype=r.dtype, device=r.device).expand(layer_points)
+    across = torch.cat([torch.full((len(r) - layer_points,), spacing_rad, dtype=r.dtype, device=r.device), tail])
     along = across
     in_cap = torch.zeros_like(layer)
     if caps is not None:
@@ -270,10 +273,11 @@ def surface_footprint(rays: torch.Tensor, normals: torch.Tensor, east_std: torch
     east = torch.where(polar, east.new_tensor([1.0, 0.0, 0.0]), east)
     east = east / torch.linalg.vector_norm(east, dim=-1, keepdim=True)
     north = torch.cross(rays, east, dim=-1)                                             # [N, 3], unit
+    normals = normals / torch.linalg.vector_norm(normals, dim=-1, keepdim=True)
     cos = (normals * rays).sum(-1, keepdim=True)                                        # [N, 1]
-    slope = rays - normals * cos                                                        # the ray on the plane
-    facing = torch.linalg.vector_norm(slope, dim=-1, keepdim=True) < 1e-9
-    slope = torch.where(facing, east - normals * (normals * east).sum(-1, keepdim=True), slope)
+    facing = cos.abs() > 1 - 1e-9                                                       # no slope to speak of
+    slope = torch.where(facing, east, rays)
+    slope = slope - normals * (normals * slope).sum(-1, keepdim=True)                   # the ray on the plane
     slope = slope / torch.linalg.vector_norm(slope, dim=-1, keepdim=True).clamp_min(1e-30)
     across = torch.cross(normals, slope, dim=-1)                                        # in the plane and across the ray
     down = torch.cross(rays, across, dim=-1)                                            # across the ray, onto `slope`

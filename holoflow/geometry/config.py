@@ -59,6 +59,10 @@ class PointCloudParams(StageParams):
                                "px", ge=0)
     smooth_range: float = param(0.05, "smooth_radius: relative depth difference at which a neighbour's weight "
                                 "falls to exp(-1/2) (steps of several times this are edges)", gt=0)
+    sky_dome: bool = param(True, "where the panorama shows sky, P_f gets a coarse sky dome behind everything, "
+                           "coloured by the sky around it (holoflow/geometry/clouds.py): a window seen from off "
+                           "the centre shows sky past its frame")
+    sky_dome_coarse: int = param(8, "sky_dome: its grid is P_f's width divided by this", ge=1)
     layer_baseline: float = param(1.0, "P_f gets a background layer: the far surface (and the sky shell) "
                                   "continued under each silhouette as far as an eye move of this much uncovers "
                                   "(holoflow/geometry/layers.py); 0 = none", "m", ge=0)
