@@ -1,4 +1,4 @@
-"""Sampling a panorama by area, and Gaussians sized by their pixel's footprint (issue 31).
+"""Sampling a panorama by area, and Gaussians sized by their pixel's footprint.
 
 An equirect row at latitude lat covers a ring of circumference 2 pi cos(lat): one point per pixel
 crowds the poles with W points on rings a few pixels round, which look like thin concentric rings of
@@ -11,11 +11,13 @@ is invented across an edge. The total is about W H 2 / pi points, 64 % of the gr
 
 A point at radial distance r then covers a patch r d wide facing the centre: its Gaussian gets
 standard deviation ``width`` x r d along the two tangent axes and ``thickness`` x r d along the ray
-(flattened: a disc facing the panorama centre), so neighbours cover each other at any view size.
+(flattened: a disc facing the panorama centre), so neighbours cover each other at any view size. With
+the surface's normal (holoflow/geometry/surfaces.py) the disc lies on the surface instead: the same
+footprint, projected along the ray onto it (``surface_footprint``), so neighbours also cover each other
+seen from an eye off the centre.
 
 **Polar caps** (``PolarCaps``). A photo's rows near a pole are still W px round and its rows finer
-than P_f's, so a view of the zenith or nadir resolves detail that one point per d x d loses (the
-zenith/nadir cameras scored 3.8 dB below the others on a real room). Beyond a latitude (P_f keeps its
+than P_f's, so a view of the zenith or nadir resolves detail that one point per d x d loses. Beyond a latitude (P_f keeps its
 rows up to ``from_deg``; the caps start at the first row of their grid that reaches past P_f's last
 row's edge, so the two touch) the caps are sampled from the panorama on a grid ``density`` times finer
 than P_f's (rows at most twice the panorama's own) with ``density`` times P_f's points along each ring
@@ -24,8 +26,7 @@ the ring (local x turned east). The caps' depth is read from P_f's depth grid (i
 filters apply). Why rows finer than the panorama's: nearly opaque discs composite front to back, so
 the Gaussians render a piecewise-constant image, not the linear interpolation between the panorama's
 rows that its own views show; rows of the panorama upsampled bilinearly carry that interpolation in
-their samples (evl_room_B preview, zenith/nadir gap: 0.83 dB with the photo's 1024 rows, 0.35 with
-1536).
+their samples (docs/reconstruction.md has the measurements).
 """
 from __future__ import annotations
 

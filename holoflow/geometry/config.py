@@ -18,8 +18,8 @@ class PointCloudParams(StageParams):
     pf_width: int = param(0, "P_f: downsampled, then depth-gradient filtered; 0 = as fine as a view_size px "
                           "view of view_fov_deg resolves (holoflow/geometry/area.py), capped at the "
                           "panorama's own width and pf_max_width", "px", ge=0)
-    pf_max_width: int = param(1536, "pf_width 0: at most this wide (the Gaussian count grows as its square: "
-                              "1536 -> 0.75 M, 2048 -> 1.3 M)", "px", ge=2)
+    pf_max_width: int = param(1536, "pf_width 0: at most this wide (the Gaussian count grows as its square)",
+                              "px", ge=2)
     pf_sampling: str = param("area", "P_f's points: area = rows thinned by cos(lat), so every point covers "
                              "the same solid angle (no rings of thin Gaussians at the poles); grid = one "
                              "per pixel (the paper)", choices=("area", "grid"))
