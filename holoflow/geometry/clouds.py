@@ -10,7 +10,9 @@ on its equirect grid:
 2. occlusion edges that the depth draws as ramps made steps (holoflow/geometry/edges.py);
 3. per-pixel depth noise smoothed within each surface, never across an edge, and each pixel's surface
    normal (holoflow/geometry/surfaces.py): the Gaussians lie on their surfaces;
-4. points whose relative depth gradient exceeds ``grad_threshold`` dropped (the paper's filter, 0.4);
+4. points whose relative depth gradient exceeds ``grad_threshold`` dropped (the paper's filter, 0.4),
+   one-sided by default (``grad_sides``): with the ramps made steps, each side of an edge keeps its own
+   pixels, so a thin near object (a window bar, a lamp's stem) keeps its points;
 5. the background layer: the far surface and the sky shell continued under every silhouette, as wide
    as an eye move of ``layer_baseline`` metres uncovers (holoflow/geometry/layers.py); where the
    panorama shows sky, a sky dome behind everything (``sky_dome``): one coarse point per direction that
@@ -104,7 +106,7 @@ def _pf_cloud(srgb: torch.Tensor, col: torch.Tensor, d: torch.Tensor, sky: torch
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
     d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range)
     normals = surface_normals(d, cfg.layer_tol)                                     # [h, w, 3]
-    keep = depth_gradient_mask(d, cfg.grad_threshold)
+    keep = depth_gradient_mask(d, cfg.grad_threshold, cfg.grad_sides == "one_sided")
     layer = None
     if cfg.layer_baseline > 0:     # the far side continued under the silhouettes
         layer = background_layer(col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg,

@@ -44,6 +44,10 @@ class PointCloudParams(StageParams):
     ps_width: int = param(256, "P_s: for the PCD-set projection", "px", ge=2)
     grad_threshold: float = param(0.4, "P_f drops points whose relative depth gradient exceeds this "
                                   "(paper 0.4)", ge=0)
+    grad_sides: str = param("one_sided", "the gradient filter's differences: central (the paper's: both pixels "
+                            "beside a step are dropped, and a thin object two pixels wide with them) or one_sided "
+                            "(a pixel is dropped only when it differs from both neighbours along an axis: on a ramp, "
+                            "or alone; holoflow/geometry/pointcloud.py)", choices=("one_sided", "central"))
     sky_radius: float = param(0.0, "far shell radius for unbounded pixels (0 = 2x the 99th percentile depth)",
                               "m", ge=0)
     edge_radius: int = param(3, "P_f: occlusion edges drawn as ramps by the depth are made steps, each ramp "

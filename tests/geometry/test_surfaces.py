@@ -170,3 +170,19 @@ def test_no_gaussian_spans_the_gap_between_a_box_and_the_wall(edge_radius, stret
     cov = _cov(torch.exp(model.log_scales.detach().double()), model.quats.detach().double())
     along = torch.sqrt(torch.einsum("ni,nij,nj->n", ray, cov, ray))
     assert float(2 * along[face].max()) < 0.15
+
+
+@pytest.mark.parametrize("sides, whole", [("one_sided", True), ("central", False)])
+def test_a_thin_near_bar_keeps_its_points(sides, whole):
+    """A bar two pixels wide at 1 m before a wall at 3 m (a window bar, a lamp's stem): with the one-sided
+    gradient filter (the default) every one of its pixels becomes a point; the paper's central
+    differences drop both, as each lies beside a step."""
+    H, W = 64, 128
+    depth = torch.full((H, W), 3.0, dtype=torch.float64)
+    depth[10:50, 60:62] = 1.0
+    rgb = torch.full((H, W, 3), 0.5)
+    pc = PointCloudParams(pf_width=W, pf_sampling="grid", layer_baseline=0.0, pf_polar_density=1.0, grad_sides=sides,
+                          sky_dome=False)
+    xyz = point_clouds(rgb, depth, pc).clouds["pf"].xyz
+    on_bar = int((torch.linalg.vector_norm(xyz, dim=-1) < 1.5).sum())
+    assert on_bar == (80 if whole else 0)
