@@ -253,7 +253,7 @@ def write_table(path: Path, rows, proc_rows, seconds: float, data: Path) -> None
                      f"**{f(med['default'], 'abs_rel')}** | **{f(med['default'], 'rmse')}** | "
                      f"**{f(med['default'], 'delta1')}** | | {med_turns} |")
         goal = med["default"]["abs_rel"] <= 0.20 and med["default"]["delta1"] >= 0.70
-        lines += ["", f"Goal (issue 20) on the indoor metric items: AbsRel <= 0.20 and delta1 >= 0.70 -> "
+        lines += ["", "Goal of the default engine on the indoor metric items: AbsRel <= 0.20 and delta1 >= 0.70 -> "
                   f"**{'met' if goal else 'NOT met'}** (median AbsRel {f(med['default'], 'abs_rel')}, "
                   f"delta1 {f(med['default'], 'delta1')})."]
     if proc_rows:

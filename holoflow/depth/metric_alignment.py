@@ -7,6 +7,13 @@ near and far pixels count alike and outliers (edge mixing, a metric network's sk
 a last plain least-squares pass on the inliers (|residual| <= 3 huber) removes the Huber bias.
 The depth 1 / (a x + b) is +inf (sky) below 1 / max_depth, and a blended pixel at the sky's border
 that is mostly sky joins it (``sky_mixed_edges``).
+
+Where the metric engine calls reference pixels sky (no finite depth: a window's view, the open sky),
+those pixels also say where the sky begins in the aligned disparity: a relative network gives the sky
+a small disparity, not zero, which alignment turns into a finite distance (a few to tens of metres),
+and its points would hang in the air behind every window. ``sky_disparity`` picks the aligned
+disparity below which the references are sky with the fewest mistakes, and every pixel below it is
+sky. With no sky among the references the rule is off.
 """
 from __future__ import annotations
 
@@ -51,6 +58,27 @@ def robust_affine_fit(x: np.ndarray, y: np.ndarray, huber: float = 0.05, iters: 
     return {"scale": float(coef[0]), "offset": float(coef[1]), "n": int(x.size),
             "rel_rms": float(np.sqrt(np.mean(r ** 2))), "rel_median_abs": float(np.median(np.abs(r))),
             "inlier_frac": float(np.mean(np.abs(r) <= huber)), "iters": done}
+
+
+def sky_disparity(aligned: np.ndarray, sky: np.ndarray, min_pixels: int = 50) -> float | None:
+    """The aligned disparity (1 / m) below which reference pixels are sky with the fewest
+    misclassified pixels: aligned [N] (a x + b at the references), sky [N] bool (the metric engine
+    found no finite depth there). None with fewer than ``min_pixels`` sky references (the rule is off).
+    Ties take the lowest threshold (the least sky)."""
+    aligned, sky = np.asarray(aligned, np.float64).ravel(), np.asarray(sky, bool).ravel()
+    keep = np.isfinite(aligned)
+    aligned, sky = aligned[keep], sky[keep]
+    if int(sky.sum()) < min_pixels or bool(sky.all()):
+        return None
+    order = np.argsort(aligned, kind="stable")
+    a, s = aligned[order], sky[order]
+    # threshold between a[k - 1] and a[k]: the k lowest are called sky
+    surface_below = np.concatenate([[0], np.cumsum(~s)])           # surface pixels called sky
+    sky_above = int(s.sum()) - np.concatenate([[0], np.cumsum(s)])  # sky pixels called surface
+    k = int(np.argmin(surface_below + sky_above))
+    if k == 0:
+        return None
+    return float(a[k - 1] if k == len(a) else 0.5 * (a[k - 1] + a[k]))
 
 
 def disparity_to_depth(disparity: np.ndarray, scale: float, offset: float, max_depth: float) -> np.ndarray:

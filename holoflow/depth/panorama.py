@@ -14,7 +14,7 @@ from holoflow.depth.face_alignment import Alignment, align_faces
 from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 from holoflow.depth.engines import resolve_engine
 from holoflow.depth.faces import face_rays, find_overlaps
-from holoflow.depth.metric_alignment import disparity_to_depth, robust_affine_fit, sky_mixed_edges
+from holoflow.depth.metric_alignment import disparity_to_depth, robust_affine_fit, sky_disparity, sky_mixed_edges
 from holoflow.depth.accuracy import depth_metrics
 from holoflow.stage import Progress
 
@@ -174,7 +174,12 @@ def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.nda
     if not fit["scale"] > 0:
         raise ValueError(f"metric alignment gave a non-positive scale ({fit['scale']:.3g}): the relative "
                          "disparity does not grow with the reference disparity (wrong engine output?)")
-    depth = sky_mixed_edges(disparity_to_depth(disparity, fit["scale"], fit["offset"], cfg.max_depth))
+    depth = disparity_to_depth(disparity, fit["scale"], fit["offset"], cfg.max_depth)
+    limit = sky_disparity(fit["scale"] * x + fit["offset"], ~(np.isfinite(z) & (z > 0)) & np.isfinite(x))
+    fit["sky_disparity"] = limit
+    if limit is not None:       # what the metric engine calls sky starts there in the aligned disparity
+        depth = np.where(fit["scale"] * disparity + fit["offset"] < limit, np.inf, depth)
+    depth = sky_mixed_edges(depth)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
 
 

@@ -1,4 +1,4 @@
-"""Sampling a panorama by area, and Gaussians sized by their pixel's footprint (issue 31).
+"""Sampling a panorama by area, and Gaussians sized by their pixel's footprint.
 
 An equirect row at latitude lat covers a ring of circumference 2 pi cos(lat): one point per pixel
 crowds the poles with W points on rings a few pixels round, which look like thin concentric rings of
@@ -11,11 +11,13 @@ is invented across an edge. The total is about W H 2 / pi points, 64 % of the gr
 
 A point at radial distance r then covers a patch r d wide facing the centre: its Gaussian gets
 standard deviation ``width`` x r d along the two tangent axes and ``thickness`` x r d along the ray
-(flattened: a disc facing the panorama centre), so neighbours cover each other at any view size.
+(flattened: a disc facing the panorama centre), so neighbours cover each other at any view size. With
+the surface's normal (holoflow/geometry/surfaces.py) the disc lies on the surface instead: the same
+footprint, projected along the ray onto it (``surface_footprint``), so neighbours also cover each other
+seen from an eye off the centre.
 
 **Polar caps** (``PolarCaps``). A photo's rows near a pole are still W px round and its rows finer
-than P_f's, so a view of the zenith or nadir resolves detail that one point per d x d loses (the
-zenith/nadir cameras scored 3.8 dB below the others on a real room). Beyond a latitude (P_f keeps its
+than P_f's, so a view of the zenith or nadir resolves detail that one point per d x d loses. Beyond a latitude (P_f keeps its
 rows up to ``from_deg``; the caps start at the first row of their grid that reaches past P_f's last
 row's edge, so the two touch) the caps are sampled from the panorama on a grid ``density`` times finer
 than P_f's (rows at most twice the panorama's own) with ``density`` times P_f's points along each ring
@@ -24,8 +26,7 @@ the ring (local x turned east). The caps' depth is read from P_f's depth grid (i
 filters apply). Why rows finer than the panorama's: nearly opaque discs composite front to back, so
 the Gaussians render a piecewise-constant image, not the linear interpolation between the panorama's
 rows that its own views show; rows of the panorama upsampled bilinearly carry that interpolation in
-their samples (evl_room_B preview, zenith/nadir gap: 0.83 dB with the photo's 1024 rows, 0.35 with
-1536).
+their samples (docs/reconstruction.md has the measurements).
 """
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ from dataclasses import dataclass
 
 import torch
 
+from holoflow.geometry.camera import quat_to_rotmat, rotmat_to_quat
 from holoflow.geometry.sphere import lonlat_to_direction
 
 
@@ -157,12 +159,14 @@ def area_counts(height: int, width: int) -> torch.Tensor:
 
 
 def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, counts: torch.Tensor | None = None,
-                rows: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+                rows: torch.Tensor | None = None
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Area sampling of an equirect RGB-D image: rgb [H, W, C], radial_depth [Hd, Wd] (metres, any
     size; usually H x W) -> directions [N, 3] (unit, world), rgb [N, C] (box average over each point's
-    longitude interval) and depth [N] (the depth pixel under the point's centre; not filtered here),
-    rows top to bottom, longitudes ascending from -pi. ``counts`` [H]: points per row (default
-    ``area_counts``); ``rows`` [H] bool: the rows to sample (default all)."""
+    longitude interval), depth [N] (the depth pixel under the point's centre; not filtered here) and
+    that pixel [N] (long, row-major index into radial_depth: what else is known per depth pixel, e.g.
+    its normal, is read there), rows top to bottom, longitudes ascending from -pi. ``counts`` [H]:
+    points per row (default ``area_counts``); ``rows`` [H] bool: the rows to sample (default all)."""
     H, W = rgb.shape[:2]
     Hd, Wd = radial_depth.shape
     counts = (area_counts(H, W) if counts is None else counts).to(rgb.device)          # [H]
@@ -172,15 +176,18 @@ def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, counts: torch.Ten
     lat = row_latitudes(H).to(rgb.device)[row]
     drow = row if Hd == H else torch.floor((row + 0.5) * (Hd / H)).long()
     dcol = torch.floor(centre if Wd == W else centre * (Wd / W)).long()
-    depth = radial_depth[drow.clamp(0, Hd - 1), dcol.clamp(0, Wd - 1)]
+    pixel = drow.clamp(0, Hd - 1) * Wd + dcol.clamp(0, Wd - 1)
+    depth = radial_depth.reshape(-1)[pixel]
     dirs = lonlat_to_direction(centre * (2 * math.pi / W) - math.pi, lat).to(radial_depth.dtype)
-    return dirs, colour, depth
+    return dirs, colour, depth, pixel
 
 
 def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, caps: PolarCaps | None = None,
-                            cap_rgb: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """``equirect_to_points`` sampled by area: xyz [N, 3] (world, depth's dtype) and rgb [N, C] of the
-    area samples with finite depth > 0 (module docstring). rgb [H, W, C] and radial_depth [H, W] are
+                            cap_rgb: torch.Tensor | None = None
+                            ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``equirect_to_points`` sampled by area: xyz [N, 3] (world, depth's dtype), rgb [N, C] and the
+    depth pixel [N] (row-major index into radial_depth) of the area samples with finite depth > 0
+    (module docstring). rgb [H, W, C] and radial_depth [H, W] are
     P_f's grid; with ``caps``, the rows beyond caps.split_deg come from cap_rgb [caps.width // 2,
     caps.width, C] instead (depth still from radial_depth). Points run from the north pole south."""
     if caps is None:
@@ -194,31 +201,40 @@ def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, caps:
         parts = [area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat > 0)),
                  area_sample(rgb, radial_depth, rows=~caps.holds(lat)),
                  area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat < 0))]
-    dirs, colour, depth = (torch.cat(x) for x in zip(*parts))
+    dirs, colour, depth, pixel = (torch.cat(x) for x in zip(*parts))
     valid = torch.isfinite(depth) & (depth > 0)
-    return dirs[valid] * depth[valid][:, None], colour[valid]
+    return dirs[valid] * depth[valid][:, None], colour[valid], pixel[valid]
 
 
 def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.6, thickness: float = 0.1,
-                        caps: PolarCaps | None = None, layer_points: int = 0, layer_spacing_rad: float = 0.0,
-                        low_pass_rad2: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
+                        caps: PolarCaps | None = None, layer_points: int = 0,
+                        layer_spacing_rad: float | torch.Tensor = 0.0,
+                        low_pass_rad2: float = 0.0, normals: torch.Tensor | None = None,
+                        max_stretch: float = 6.0) -> tuple[torch.Tensor, torch.Tensor]:
     """Scales [N, 3] (metres) and quaternions [N, 4] (w, x, y, z) of Gaussians at points xyz [N, 3]
     sampled from the panorama centre (the origin) with angular spacing ``spacing_rad``: standard
     deviation ``width`` x r spacing along the tangent axes, ``thickness`` x r spacing along the ray
     (local z turned onto the ray). r is clamped away from 0. Points in the ``caps`` use the caps'
     spacings instead: caps.ring_rad along the ring (local x turned east), caps.row_rad across it; the
-    last ``layer_points`` points (P_f's background layer, a sparser grid) ``layer_spacing_rad``.
+    last ``layer_points`` points (P_f's background layer and sky dome, sparser grids) ``layer_spacing_rad``
+    (one value, or one per such point [layer_points]).
 
     ``low_pass_rad2``: the variance the rasterizer adds to every disc at the viewing size (its 0.3 px^2
     times a view pixel's angle squared, radians^2 at unit distance). It is taken off each tangent
     variance, so that ``width`` is the standard deviation a disc is *rendered* with at that size
     whatever its spacing in pixels: finer grids (the polar caps, a P_f as fine as the view) would
     otherwise render relatively wider, their neighbours overlapping more, and the front disc's colour
-    would spread further (docs/reconstruction.md, stop 38). Never below half of ``width`` x spacing."""
+    would spread further (docs/reconstruction.md). Never below half of ``width`` x spacing.
+
+    ``normals`` [N, 3] (unit, world; holoflow/geometry/surfaces.py): the discs lie on their surface
+    instead of facing the centre: the footprint seen from the centre is projected along the ray onto
+    the plane of the normal (``surface_footprint``), so a surface seen at incidence a gets discs
+    1 / cos(a) longer down its slope (at most ``max_stretch``) and neighbours overlap from any eye."""
     r = torch.linalg.vector_norm(xyz, dim=-1).clamp_min(1e-9)                   # [N]
     d = xyz / r[:, None]
     layer = torch.arange(len(r), device=r.device) >= len(r) - layer_points
-    across = torch.where(layer, layer_spacing_rad, spacing_rad).to(r.dtype)
+    tail = torch.as_tensor(layer_spacing_rad, dtype=r.dtype, device=r.device).expand(layer_points)
+    across = torch.cat([torch.full((len(r) - layer_points,), spacing_rad, dtype=r.dtype, device=r.device), tail])
     along = across
     in_cap = torch.zeros_like(layer)
     if caps is not None:
@@ -231,6 +247,9 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
         nominal = (width * spacing) ** 2
         return torch.sqrt(torch.clamp(nominal - low_pass_rad2, min=0.25 * nominal))
 
+    if normals is not None:
+        return surface_footprint(d, normals.to(d), r * tangent(along), r * tangent(across), thickness * r * across,
+                                 max_stretch)
     scales = torch.stack([r * tangent(along), r * tangent(across), thickness * r * across], -1)
     # the shortest rotation taking +z to d: q = (1 + d_z, -d_y, d_x, 0), normalised; d = -z: 180 deg about x
     q = torch.stack([1 + d[:, 2], -d[:, 1], d[:, 0], torch.zeros_like(r)], -1)
@@ -242,11 +261,47 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
     return scales, q
 
 
+def surface_footprint(rays: torch.Tensor, normals: torch.Tensor, east_std: torch.Tensor, north_std: torch.Tensor,
+                      thickness: torch.Tensor, max_stretch: float = 6.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """Scales [N, 3] and quaternions [N, 4] (w, x, y, z) of discs lying on their surface: the footprint
+    seen along rays [N, 3] (unit) as an ellipse across the ray, standard deviations east_std [N] (along
+    growing longitude) and north_std [N] (metres), projected along the ray onto the plane of normals
+    [N, 3] (unit): the in-plane axis across the slope keeps its length, the one down the slope (the
+    ray's own projection) grows by 1 / |cos(incidence)|, at most ``max_stretch``. thickness [N]
+    (metres) is the standard deviation along the normal (local z)."""
+    east = torch.stack([rays[:, 2], torch.zeros_like(rays[:, 0]), -rays[:, 0]], -1)
+    polar = torch.linalg.vector_norm(east, dim=-1, keepdim=True) < 1e-9                # straight up / down
+    east = torch.where(polar, east.new_tensor([1.0, 0.0, 0.0]), east)
+    east = east / torch.linalg.vector_norm(east, dim=-1, keepdim=True)
+    north = torch.cross(rays, east, dim=-1)                                             # [N, 3], unit
+    normals = normals / torch.linalg.vector_norm(normals, dim=-1, keepdim=True)
+    cos = (normals * rays).sum(-1, keepdim=True)                                        # [N, 1]
+    facing = cos.abs() > 1 - 1e-9                                                       # no slope to speak of
+    slope = torch.where(facing, east, rays)
+    slope = slope - normals * (normals * slope).sum(-1, keepdim=True)                   # the ray on the plane
+    slope = slope / torch.linalg.vector_norm(slope, dim=-1, keepdim=True).clamp_min(1e-30)
+    across = torch.cross(normals, slope, dim=-1)                                        # in the plane and across the ray
+    down = torch.cross(rays, across, dim=-1)                                            # across the ray, onto `slope`
+    stretch = 1.0 / cos.abs().clamp_min(1.0 / max_stretch)                              # [N, 1]
+
+    def onto_plane(v: torch.Tensor) -> torch.Tensor:                                   # [N, 3] -> [N, 2] in (across, slope)
+        return torch.cat([(v * across).sum(-1, keepdim=True), (v * down).sum(-1, keepdim=True) * stretch], -1)
+
+    A, B = onto_plane(east) * east_std[:, None], onto_plane(north) * north_std[:, None]   # [N, 2]
+    c00 = A[:, 0] ** 2 + B[:, 0] ** 2                                                    # the 2x2 covariance
+    c01 = A[:, 0] * A[:, 1] + B[:, 0] * B[:, 1]
+    c11 = A[:, 1] ** 2 + B[:, 1] ** 2
+    phi = 0.5 * torch.atan2(2 * c01, c00 - c11)
+    half, mean = torch.sqrt((0.5 * (c00 - c11)) ** 2 + c01 ** 2), 0.5 * (c00 + c11)
+    e1 = torch.cos(phi)[:, None] * across + torch.sin(phi)[:, None] * slope
+    R = torch.stack([e1, torch.cross(normals, e1, dim=-1), normals], -1)               # columns: local x, y, z
+    scales = torch.stack([torch.sqrt(mean + half), torch.sqrt((mean - half).clamp_min(0) + 1e-30), thickness], -1)
+    return scales, rotmat_to_quat(R)
+
+
 def _turn_east(q: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
     """Quaternions q [M, 4] (taking local z to the rays d [M, 3]) composed with the turn about local z
     that takes local x onto east, the direction of growing longitude ((d_z, 0, -d_x), normalised)."""
-    from holoflow.geometry.camera import quat_to_rotmat
-
     R = quat_to_rotmat(q)                                                       # [M, 3, 3]
     east = torch.stack([d[:, 2], torch.zeros_like(d[:, 0]), -d[:, 0]], -1)
     east = east / torch.linalg.vector_norm(east, dim=-1, keepdim=True).clamp_min(1e-12)

@@ -9,7 +9,7 @@ from holoflow.flow.params import Engines, StageParams, param
 
 @dataclass(frozen=True)
 class PointCloudParams(StageParams):
-    """Equirect RGB-D -> P0, P_f, P_s (holoflow/geometry/pointcloud.py)."""
+    """Equirect RGB-D -> P0, P_f, P_s (holoflow/geometry/clouds.py)."""
 
     ENGINES = Engines("one engine, the method: equirect_to_points(rgb [H, W, 3], radial depth [H, W]) per cloud",
                       default="holoflow.geometry.pointcloud:equirect_to_points")
@@ -18,8 +18,8 @@ class PointCloudParams(StageParams):
     pf_width: int = param(0, "P_f: downsampled, then depth-gradient filtered; 0 = as fine as a view_size px "
                           "view of view_fov_deg resolves (holoflow/geometry/area.py), capped at the "
                           "panorama's own width and pf_max_width", "px", ge=0)
-    pf_max_width: int = param(1536, "pf_width 0: at most this wide (the Gaussian count grows as its square: "
-                              "1536 -> 0.75 M, 2048 -> 1.3 M)", "px", ge=2)
+    pf_max_width: int = param(1536, "pf_width 0: at most this wide (the Gaussian count grows as its square)",
+                              "px", ge=2)
     pf_sampling: str = param("area", "P_f's points: area = rows thinned by cos(lat), so every point covers "
                              "the same solid angle (no rings of thin Gaussians at the poles); grid = one "
                              "per pixel (the paper)", choices=("area", "grid"))
@@ -44,6 +44,10 @@ class PointCloudParams(StageParams):
     ps_width: int = param(256, "P_s: for the PCD-set projection", "px", ge=2)
     grad_threshold: float = param(0.4, "P_f drops points whose relative depth gradient exceeds this "
                                   "(paper 0.4)", ge=0)
+    grad_sides: str = param("one_sided", "the gradient filter's differences: central (the paper's: both pixels "
+                            "beside a step are dropped, and a thin object two pixels wide with them) or one_sided "
+                            "(a pixel is dropped only when it differs from both neighbours along an axis: on a ramp, "
+                            "or alone; holoflow/geometry/pointcloud.py)", choices=("one_sided", "central"))
     sky_radius: float = param(0.0, "far shell radius for unbounded pixels (0 = 2x the 99th percentile depth)",
                               "m", ge=0)
     edge_radius: int = param(3, "P_f: occlusion edges drawn as ramps by the depth are made steps, each ramp "
@@ -54,6 +58,15 @@ class PointCloudParams(StageParams):
                               "smooth surface spanning less is never touched; pixels within layer_tol of "
                               "either end stay)", gt=0)
     edge_rounds: int = param(2, "edge_radius: passes (a ramp wider than the window needs two)", ge=1)
+    smooth_radius: int = param(3, "P_f: depth noise smoothed within each surface over a window this many px "
+                               "around each pixel, never across an edge (holoflow/geometry/surfaces.py); 0 = off",
+                               "px", ge=0)
+    smooth_range: float = param(0.05, "smooth_radius: relative depth difference at which a neighbour's weight "
+                                "falls to exp(-1/2) (steps of several times this are edges)", gt=0)
+    sky_dome: bool = param(True, "where the panorama shows sky, P_f gets a coarse sky dome behind everything, "
+                           "coloured by the sky around it (holoflow/geometry/clouds.py): a window seen from off "
+                           "the centre shows sky past its frame")
+    sky_dome_coarse: int = param(8, "sky_dome: its grid is P_f's width divided by this", ge=1)
     layer_baseline: float = param(1.0, "P_f gets a background layer: the far surface (and the sky shell) "
                                   "continued under each silhouette as far as an eye move of this much uncovers "
                                   "(holoflow/geometry/layers.py); 0 = none", "m", ge=0)

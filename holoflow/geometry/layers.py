@@ -22,9 +22,7 @@ linearly in inverse depth along the growth direction from the two source pixels 
 stay nearly planar: 1 / depth is affine along an image line under a pinhole; on the sphere locally),
 clamped to within a factor 1.5 of the edge's own depth. Off by default: on an estimated depth map
 the two pixels at an edge are rarely the far surface's own (a ramp, noise), and their slope throws
-the layer away from the surface it continues (evl_room_B 0.5 m off centre, P_f's initial Gaussians:
-3.0 % empty with the slope, 3.7 % without; with the ramps snapped, holoflow/geometry/edges.py: 2.4 %
-with the slope, 0.2 % without).
+the layer away from the surface it continues (docs/reconstruction.md).
 The band is measured in angle on the sphere (a column step is cos(latitude) x a row step).
 
 Pixels that are not sources (P_f's dropped edge pixels, whose depth mixes both sides) count as lying

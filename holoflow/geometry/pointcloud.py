@@ -37,19 +37,28 @@ def equirect_to_points(rgb: torch.Tensor, radial_depth: torch.Tensor) -> tuple[t
     return dirs[valid] * radial_depth[valid][:, None], rgb[valid]
 
 
-def depth_gradient(radial_depth: torch.Tensor) -> torch.Tensor:
-    """Relative depth gradient g [H, W] per pixel (module docstring); inf/nan where depth is not finite > 0."""
+def depth_gradient(radial_depth: torch.Tensor, one_sided: bool = False) -> torch.Tensor:
+    """Relative depth gradient g [H, W] per pixel (module docstring); inf/nan where depth is not finite > 0.
+    one_sided: along each axis the smaller of the two one-sided differences instead of the central one,
+    so a pixel beside a step (one neighbour on its own surface) scores its own surface's slope and only
+    a pixel that differs from both neighbours (on a ramp, or alone) scores high."""
     D = radial_depth
     P = pad_equirect(D[None], 1)[0]  # [H + 2, W + 2]
-    gx = 0.5 * (P[1:-1, 2:] - P[1:-1, :-2])
-    gy = 0.5 * (P[2:, 1:-1] - P[:-2, 1:-1])
+    if one_sided:
+        c = P[1:-1, 1:-1]
+        gx = torch.minimum((P[1:-1, 2:] - c).abs(), (c - P[1:-1, :-2]).abs())
+        gy = torch.minimum((P[2:, 1:-1] - c).abs(), (c - P[:-2, 1:-1]).abs())
+    else:
+        gx = 0.5 * (P[1:-1, 2:] - P[1:-1, :-2])
+        gy = 0.5 * (P[2:, 1:-1] - P[:-2, 1:-1])
     g = torch.sqrt(gx * gx + gy * gy) / D
     return torch.where(torch.isfinite(D) & (D > 0), g, torch.full_like(g, float("inf")))
 
 
-def depth_gradient_mask(radial_depth: torch.Tensor, threshold: float = 0.4) -> torch.Tensor:
-    """Keep-mask [H, W] bool: pixels whose relative depth gradient is <= ``threshold`` (paper: 0.4)."""
-    g = depth_gradient(radial_depth)
+def depth_gradient_mask(radial_depth: torch.Tensor, threshold: float = 0.4, one_sided: bool = False) -> torch.Tensor:
+    """Keep-mask [H, W] bool: pixels whose relative depth gradient (``depth_gradient``) is <= ``threshold``
+    (paper: 0.4, central differences)."""
+    g = depth_gradient(radial_depth, one_sided)
     return torch.nan_to_num(g, nan=float("inf")) <= threshold
 
 

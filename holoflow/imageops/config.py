@@ -7,6 +7,12 @@ from dataclasses import dataclass
 from holoflow.flow.params import Engines, StageParams, param
 
 
+def max_width_param() -> int:
+    """The ``max_width`` field that stylize, upscale and detail share: how wide an input may stay."""
+    return param(2048, "an input wider than width keeps its own width up to this, and is resized to it beyond "
+                 "(a user's photo is never shrunk below it; holoflow/imageops/photo.py); 0 = no cap", "px", ge=0)
+
+
 @dataclass(frozen=True)
 class StylizeParams(StageParams):
     """Lineart of the base panorama -> stylized panorama (docs/panorama.md)."""
@@ -20,9 +26,7 @@ class StylizeParams(StageParams):
 
     width: int = param(1024, "output width (lineart and stylized panorama)", "px", ge=1)
     height: int = param(512, "output height", "px", ge=1)
-    max_width: int = param(2048, "an input wider than width keeps its own size up to this (a user's photo is "
-                           "never shrunk below it; holoflow/imageops/photo.py): 2048 holds all the preview's 1536 px "
-                           "P_f and 384 px fit views resolve; quality 4096; 0 = no cap", "px", ge=0)
+    max_width: int = max_width_param()
     style: str = param("auto", "auto = from the prompt's style words; none = passthrough; or a style name "
                        "(holoflow/imageops/styles.py). A user's photo with no style asked for passes "
                        "through with any engine")
@@ -45,9 +49,7 @@ class UpscaleParams(StageParams):
 
     width: int = param(2048, "output width", "px", ge=1)
     height: int = param(1024, "output height", "px", ge=1)
-    max_width: int = param(2048, "an input wider than width keeps its own size up to this (a user's photo is "
-                           "never shrunk below it; holoflow/imageops/photo.py): 2048 holds all the preview's 1536 px "
-                           "P_f and 384 px fit views resolve; quality 4096; 0 = no cap", "px", ge=0)
+    max_width: int = max_width_param()
     model: str = param("", "realesrgan: local weights")
     tile: int = param(256, "realesrgan: tile side", "px", ge=0)
 
@@ -65,9 +67,7 @@ class DetailParams(StageParams):
 
     width: int = param(2048, "output width", "px", ge=1)
     height: int = param(1024, "output height", "px", ge=1)
-    max_width: int = param(2048, "an input wider than width keeps its own size up to this (a user's photo is "
-                           "never shrunk below it; holoflow/imageops/photo.py): 2048 holds all the preview's 1536 px "
-                           "P_f and 384 px fit views resolve; quality 4096; 0 = no cap", "px", ge=0)
+    max_width: int = max_width_param()
     strength: float = param(0.5, "classical: detail boost (0 = plain resize); controlnet_tile: img2img strength",
                             ge=0)
     model: str = param("", "controlnet_tile: SD 1.5 base model")

@@ -1,7 +1,7 @@
-"""A user's photo stays their photo on its way to the detail panorama (issue 31).
+"""A user's photo stays their photo on its way to the detail panorama.
 
 An image taken with ``--use base_pano=PHOTO`` carries ``holoflow.source`` in its EXR header
-(holoflow/uses.py). stylize, upscale and detail carry that provenance on and add
+(holoflow/flow/uses.py). stylize, upscale and detail carry that provenance on and add
 ``holoflow.unaltered`` (1 while every stage so far passed the pixels through untouched, 0 once one
 changed them). The rules, for every engine:
 

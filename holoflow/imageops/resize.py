@@ -39,7 +39,7 @@ def lanczos_resize(img: np.ndarray, width: int, height: int, wrap: bool = True) 
 
     ``wrap``: columns wrap around (the seam of an equirect panorama), rows repeat the edge row. Matches
     ``lanczos_resize_reference`` (OpenImageIO) to ~1e-4 and costs a tap count per axis instead of its
-    square: a 6656 -> 2048 px shrink takes ~0.2 s instead of ~3 s."""
+    square (figures: docs/panorama.md)."""
     img = np.asarray(img, dtype=np.float32)
     squeeze = img.ndim == 2
     if squeeze:

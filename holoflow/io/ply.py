@@ -1,6 +1,6 @@
 """PLY read/write through plyfile, in the layouts every viewer reads (binary little-endian).
 
-Point clouds: ``x y z`` float32, ``red green blue`` uchar.
+Point clouds: ``x y z`` float32, optionally ``nx ny nz`` float32 (unit normals), ``red green blue`` uchar.
 Gaussians (INRIA 3DGS layout): ``x y z nx ny nz f_dc_0..2 [f_rest_0..] opacity scale_0..2 rot_0..3``,
 all float32, stored BEFORE activation: opacity is a logit, scales are log-scales, f_dc = (rgb - 0.5) /
 0.28209479 (SH degree 0 coefficient), rot is a (w, x, y, z) quaternion, not necessarily normalised.
@@ -18,8 +18,9 @@ class PlyError(ValueError):
     """A file that is not a readable PLY, or arrays that do not fit a layout."""
 
 
-def write_points(path: str | Path, xyz: np.ndarray, rgb: np.ndarray) -> None:
-    """Write a coloured point cloud: xyz [N, 3] (float32 metres), rgb [N, 3] (uint8)."""
+def write_points(path: str | Path, xyz: np.ndarray, rgb: np.ndarray, normals: np.ndarray | None = None) -> None:
+    """Write a coloured point cloud: xyz [N, 3] (float32 metres), rgb [N, 3] (uint8) and, when given,
+    normals [N, 3] (float32 unit vectors: nx ny nz after x y z, as MeshLab and Open3D read them)."""
     xyz = np.asarray(xyz, dtype=np.float32).reshape(-1, 3)
     rgb = np.asarray(rgb)
     if rgb.dtype != np.uint8:
@@ -27,10 +28,17 @@ def write_points(path: str | Path, xyz: np.ndarray, rgb: np.ndarray) -> None:
     rgb = rgb.reshape(-1, 3)
     if len(rgb) != len(xyz):
         raise PlyError(f"write_points: {len(xyz)} points but {len(rgb)} colours")
-    dtype = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
-    vertex = np.empty(len(xyz), dtype=dtype)
+    dtype = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    if normals is not None:
+        normals = np.asarray(normals, dtype=np.float32).reshape(-1, 3)
+        if len(normals) != len(xyz):
+            raise PlyError(f"write_points: {len(xyz)} points but {len(normals)} normals")
+        dtype += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+    vertex = np.empty(len(xyz), dtype=dtype + [("red", "u1"), ("green", "u1"), ("blue", "u1")])
     for i, name in enumerate("xyz"):
         vertex[name] = xyz[:, i]
+        if normals is not None:
+            vertex["n" + name] = normals[:, i]
     for i, name in enumerate(("red", "green", "blue")):
         vertex[name] = rgb[:, i]
     _write(path, vertex)
@@ -46,6 +54,14 @@ def read_points(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     else:
         rgb = np.full((len(xyz), 3), 128, np.uint8)
     return xyz, rgb
+
+
+def read_point_normals(path: str | Path) -> np.ndarray | None:
+    """The normals [N, 3] float32 of a point cloud written with them (``write_points``), else None."""
+    v = _read_vertex(path)
+    if not all(c in v.dtype.names for c in ("nx", "ny", "nz")):
+        return None
+    return np.stack([v["nx"], v["ny"], v["nz"]], axis=1).astype(np.float32)
 
 
 def gaussian_fields(num_rest: int = 0) -> list[str]:

@@ -1,5 +1,5 @@
 """Colour fit at the viewing size: the Gaussians' base colours solved against the panorama's own
-views at the size a viewer shows them (issue 31).
+views at the size a viewer shows them.
 
 Training at 64-128 px (what a CPU affords) leaves a scene whose 512 px views are blurred: each
 Gaussian keeps roughly its pixel's colour, and front-to-back compositing of overlapping discs is no

@@ -26,12 +26,17 @@ class OptimParams(StageParams):
                             choices=("footprint", "knn"))
     footprint_width: float = param(0.68, "init_scale footprint: standard deviation along the surface as rendered "
                                    "at point_cloud's view_size (the rasterizer's 0.3 px^2 low-pass included, "
-                                   "holoflow/geometry/area.py); the preview's P_f (2.5 view px apart): 0.73 "
-                                   "softer, BRISQUE 1.37-1.47x the photos'; 0.68: 1.14-1.23x, +0.4 dB; 0.63: "
-                                   "speckle on the street photo, 0.42 % empty at 0.5 m",
-                                   "fraction of the point's footprint", gt=0)
+                                   "holoflow/geometry/area.py): wider is softer, narrower speckles "
+                                   "(docs/reconstruction.md)", "fraction of the point's footprint", gt=0)
     footprint_thickness: float = param(0.1, "init_scale footprint: standard deviation along the ray",
                                        "fraction of the point's footprint", gt=0)
+    footprint_orient: str = param("surface", "init_scale footprint: surface = each disc lies on its surface "
+                                  "(pf.ply's normals; the footprint seen from the centre projected onto it), so "
+                                  "neighbours overlap from eyes off the centre; centre = discs face the "
+                                  "panorama centre", choices=("surface", "centre"))
+    footprint_max_stretch: float = param(6.0, "footprint_orient surface: a disc is at most this many times "
+                                         "longer down a slanted surface than across (1 / cos(incidence))",
+                                         ge=1)
     densify_every: int = param(50, "split / clone every this many iterations (paper: 100)", "iters", ge=1)
     densify_from: int = param(40, "densify at densify_from < step <= densify_stop x iters (3DGS: from 500)",
                               "iters", ge=0)
@@ -71,15 +76,12 @@ class TransferOptParams(OptimParams):
     preview_size: int = param(96, "side of the look-around preview renders", "px", ge=1)
     fit_size: int = param(384, "colour fit after training: the base cameras at this view size, targets from "
                           "the detail panorama (holoflow/recon/colour_fit.py); 384 px at 47.43 deg is as fine "
-                          "as a 2915 px panorama, past the preview's 1536 px P_f (512: +0.0 dB at 512 px on "
-                          "evl_room_B, 256: -0.5 dB)", "px", ge=8)
+                          "as a 2915 px panorama", "px", ge=8)
     fit_iters: int = param(1, "colour fit passes over the base cameras at fit_size (0 = none, the paper); "
                            "each is one render and one backward of every base view", "passes", ge=0)
     fit_relax: float = param(1.0, "colour fit step: 1 = the full weight-normalised residual (SART)", gt=0, lt=2)
     fit_polar_weight: float = param(8.0, "colour fit: weight of the base views within 25 deg of the zenith or "
-                                    "nadir, which see the polar caps head on, against 1 for the others "
-                                    "(evl_room_B preview: 1: zenith/nadir gap 1.54 dB, 4: 1.14, 8: 1.04, "
-                                    "side views -0.1 dB)", ge=0)
+                                    "nadir, which see the polar caps head on, against 1 for the others", ge=0)
     fit_max_colour: float = param(1.5, "colour fit: upper bound of a fitted colour (sRGB; the renderer "
                                   "clamps at 0 only, as 3DGS): above 1 a Gaussian can make up for coverage "
                                   "below 1 next to a white highlight; 8-bit formats (.splat) clip it", gt=0)

@@ -32,9 +32,9 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str 
     rgb [N, 3] uint8 (sRGB), with
     initial ``opacity`` (a stage's ``init_opacity``; 3DGS: 0.1; a surface point cloud tolerates more,
     which shortens training), on ``device``. ``footprint`` = (angular spacing of the cloud in
-    radians, width, thickness[, polar caps, layer points, layer spacing, low-pass]): each Gaussian
-    covers its point's pixel (holoflow.geometry.area.footprint_gaussians); None: the 3DGS
-    nearest-neighbour size."""
+    radians, width, thickness[, polar caps, layer points, layer spacing, low-pass, normals, max stretch]):
+    each Gaussian covers its point's pixel, on its surface where normals are given
+    (holoflow.geometry.area.footprint_gaussians); None: the 3DGS nearest-neighbour size."""
     from holoflow.splat import GaussianModel
 
     if len(xyz) == 0:
@@ -53,9 +53,10 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str 
 
 def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
     """``init_model``'s footprint for the P_f of a point_cloud output folder: (its pf.json's angular
-    spacing, cfg.footprint_width, cfg.footprint_thickness, its polar caps or None, its background
-    layer's point count and spacing, the rasterizer's low-pass at its viewing size in radians^2), or
-    None with ``init_scale: knn`` or no pf.json (a cloud of the user's own)."""
+    spacing, cfg.footprint_width, cfg.footprint_thickness, its polar caps or None, the point count of its
+    background layer and sky dome (its last points) and their spacing per point, the rasterizer's low-pass at its viewing size in radians^2, its
+    pf.ply's normals [N, 3] with ``footprint_orient: surface`` (else None: discs face the centre) and
+    cfg.footprint_max_stretch), or None with ``init_scale: knn`` or no pf.json (a cloud of the user's own)."""
     import json
     from pathlib import Path
 
@@ -67,10 +68,19 @@ def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
         return None
     pf = json.loads(path.read_text())
     caps = PolarCaps(**pf["polar_caps"]) if "polar_caps" in pf else None
-    layer = pf.get("layer", {"points": 0, "spacing_rad": 0.0})
+    tails = [pf[k] for k in ("layer", "dome") if k in pf]      # sparser grids after P_f's own points, in order
+    tail_points = sum(int(t["points"]) for t in tails)
+    tail_spacing = torch.cat([torch.full((int(t["points"]),), float(t["spacing_rad"]), dtype=torch.float64)
+                              for t in tails]) if tails else 0.0
     low_pass = EPS2D * float(pf.get("view_pixel_rad", 0.0)) ** 2       # 0.3 px^2 at the view size
-    return (float(pf["spacing_rad"]), cfg.footprint_width, cfg.footprint_thickness, caps, int(layer["points"]),
-            float(layer["spacing_rad"]), low_pass)
+    normals = None
+    if cfg.footprint_orient == "surface":
+        from holoflow.io.ply import read_point_normals
+
+        found = read_point_normals(Path(cloud_dir) / "pf.ply")
+        normals = None if found is None else torch.from_numpy(found).double()
+    return (float(pf["spacing_rad"]), cfg.footprint_width, cfg.footprint_thickness, caps, tail_points,
+            tail_spacing, low_pass, normals, cfg.footprint_max_stretch)
 
 
 def panorama_extent(xyz: np.ndarray) -> float:

@@ -31,7 +31,7 @@ def _room(width: int, sampling: str, cfg: TransferOptParams, pc: PointCloudParam
     caps = polar_caps(width, 2 * width, pc.pf_polar_density, pc.pf_polar_from_deg)
     if sampling == "area":
         cap_rgb = None if caps is None else rgb[:1, :1].expand(caps.width // 2, caps.width, 3)
-        xyz, c = equirect_to_area_points(rgb, depth, caps, cap_rgb)
+        xyz, c, _ = equirect_to_area_points(rgb, depth, caps, cap_rgb)
     else:
         xyz, c = equirect_to_points(rgb, depth)
     low_pass = EPS2D * view_pixel_rad(pc.view_size, pc.view_fov_deg) ** 2   # as recon.schedule.cloud_footprint
@@ -86,7 +86,7 @@ def test_area_sampling_counts_and_colours():
     assert abs(int(counts.sum()) / (256 * 512) - 2 / math.pi) < 0.01            # 64 % of the grid
     rng = torch.Generator().manual_seed(0)
     rgb = torch.rand(256, 512, 3, generator=rng, dtype=torch.float64)
-    dirs, colour, _ = area_sample(rgb, torch.ones(256, 512, dtype=torch.float64))
+    dirs, colour, _, _ = area_sample(rgb, torch.ones(256, 512, dtype=torch.float64))
     assert torch.allclose(torch.linalg.vector_norm(dirs, dim=-1), torch.ones(len(dirs), dtype=torch.float64))
     # each row's box averages keep the row's mean colour (the intervals tile the row exactly)
     row = torch.repeat_interleave(torch.arange(256), counts)
@@ -130,7 +130,7 @@ def test_polar_caps_keep_the_detail_of_the_polar_rows():
     psnr = {}
     for density in (1.0, 2.0):
         caps = polar_caps(pf_width, 2 * pf_width, density, 65.0)
-        xyz, c = equirect_to_area_points(col, depth, caps, None if caps is None else pano)
+        xyz, c, _ = equirect_to_area_points(col, depth, caps, None if caps is None else pano)
         model = init_model(xyz.numpy(), (c.numpy() * 255 + 0.5).astype(np.uint8), cfg.init_opacity,
                            footprint=(2 * math.pi / pf_width, cfg.footprint_width, cfg.footprint_thickness, caps))
         with torch.no_grad():

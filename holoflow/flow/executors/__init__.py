@@ -16,6 +16,9 @@ one also ``expect(needs, ahead)`` (warm templates and compiled numba kernels for
 """
 from __future__ import annotations
 
+# The module step_env loads first: importing a submodule binds its name on the package, which would
+# otherwise replace the function step_env below whenever the module is first imported later.
+from . import step_env as _step_env_module  # noqa: F401
 from .task import StepTask, gpu_ids, host_memory_gb, step_env
 
 __all__ = ["StepTask", "gpu_ids", "host_memory_gb", "make_executor", "step_env"]

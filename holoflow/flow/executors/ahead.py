@@ -1,8 +1,8 @@
 """Compile ahead: a run compiles the numba kernels of its steps to come while the steps before them run.
 
 Every ``@njit(cache=True)`` kernel compiles on its first call after an install and keeps its machine
-code in numba's disk cache; on a fresh install the preview's first run spent ~13 s of pre_opt
-compiling the splatting kernels, ~1.5 s of point_cloud and ~0.1 s of inp_set (2-core CPU). Numba
+code in numba's disk cache, so a fresh install's first run compiles pre_opt's splatting kernels,
+point_cloud's and inp_set's inside those steps (seconds: docs/bench-preview.md). Numba
 looks in its disk cache whenever a kernel meets a new signature, so a process that compiles the
 kernels before the step that calls them hands them over through that cache.
 
@@ -12,7 +12,7 @@ starts one process beside its first step (``python -m holoflow.flow.executors.ah
 that calls them in the order the steps need them. The preview's steps before pre_opt use one core
 each, so on a 2-core machine the compiling takes the idle one. A step that starts before its kernels
 are in the cache compiles the missing ones itself, as without this process. With a warm cache the
-process only loads the kernels (~2.4 s of CPU: imports, loading). It runs at nice 19, on what the
+process only imports the modules and loads the kernels. It runs at nice 19, on what the
 steps leave idle: on a busy machine it would only take the steps' time.
 """
 from __future__ import annotations

@@ -22,12 +22,11 @@ EXTRAS = ("avx512_fp16", "avx512_bf16", "avx512_vnni", "amx_tile")
 
 #: environment for every step (unless the user's environment sets the variable): MKL (torch's BLAS) on
 #: its AVX2 branch (conditional numerical reproducibility), OpenBLAS (NumPy's and SciPy's) on its Haswell
-#: kernels: both what they pick by themselves on an AMD EPYC (the same bytes, measured), and what an Intel
-#: Xeon would otherwise leave for AVX-512 kernels; and NumPy's own SIMD loops on their AVX2 (x86-64-v3)
-#: versions: its AVX-512 ones (SVML) round exp / log / pow differently, which changed 8 of the tiny
-#: run's 13 steps' bytes here. Cost measured on this EPYC: NumPy-heavy functions 10-20 % slower
-#: (docs/store.md); the libraries' other dispatch (torch's ATen, oneDNN, OpenCV, numba) left the tiny
-#: run's bytes unchanged when forced to AVX2 / generic code.
+#: kernels: both what they pick by themselves on an AMD EPYC, and what an Intel Xeon would otherwise
+#: leave for AVX-512 kernels; and NumPy's own SIMD loops on their AVX2 (x86-64-v3) versions: its
+#: AVX-512 ones (SVML) round exp / log / pow differently. The libraries' other dispatch (torch's ATen,
+#: oneDNN, OpenCV, numba) is left alone: it does not change a run's bytes. What it costs and what it
+#: changed: docs/store.md.
 PINNED_ENV = {"MKL_CBWR": "AVX2", "OPENBLAS_CORETYPE": "Haswell",
               "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"}
 

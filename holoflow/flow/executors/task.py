@@ -33,10 +33,9 @@ def step_env(resources: dict[str, Any]) -> dict[str, str]:
     """Thread-count variables for a step: its declared cpus, capped at this host's cores; and idle
     OpenMP threads (torch's, numba's: one libgomp) spin for GOMP_SPINCOUNT = 30000 polls (tens of
     microseconds) before they sleep, unless the environment sets GOMP_SPINCOUNT or OMP_WAIT_POLICY.
-    libgomp's default spins 10x longer, which starved a step's own main thread on a loaded machine;
-    sleeping at once (PASSIVE) makes every kernel launch wait for a futex wake-up: 150 transfer_opt
-    steps took 5.4 s passive, 3.9 s with the bounded spin on 2 idle cores, 11.6 vs 9.1 s with two
-    busy processes beside them (docs/bench-preview.md).
+    libgomp's default spins 10x longer, which starves a step's own main thread on a loaded machine;
+    sleeping at once (PASSIVE) makes every kernel launch wait for a futex wake-up (figures:
+    docs/bench-preview.md).
 
     BLAS code paths are pinned (``holoflow.flow.executors.step_env.PINNED_ENV``) so that Intel and AMD hosts run
     the same kernels. The same on every executor, so a step computes the same bytes under ``-j 1``,

@@ -180,4 +180,4 @@ if __name__ == "__main__":
     args = sys.argv[2:]
     cut = args.index("--idle") if "--idle" in args else len(args)
     serve(int(sys.argv[1]), args[:cut], args[cut + 1:])
-    os._exit(0)     # nothing to flush or clean up: skip tearing down torch & co (~0.2 s the run waits on)
+    os._exit(0)     # nothing to flush or clean up: skip tearing down torch & co (the run waits on it)

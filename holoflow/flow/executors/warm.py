@@ -21,10 +21,10 @@ from types import SimpleNamespace
 from ..code_closure import HOLOFLOW_ROOT
 from .step import popen
 
-#: third-party modules worth importing once per run (seconds each on a 2-core machine, for torch)
+#: third-party modules worth importing once per run (torch alone takes seconds)
 HEAVY = frozenset({"torch", "numpy", "scipy", "kornia", "numba", "cv2", "OpenImageIO", "OpenEXR", "plyfile"})
 #: what a module loads on first use rather than at import: torch's optimisers import torch._dynamo in
-#: their constructor (0.7 s on a 2-core machine, paid by every training step). A template imports
+#: their constructor (a cost every training step would pay). A template imports
 #: these while it waits for its first step (template.serve's ``idle``)
 ON_FIRST_USE = {"torch.optim": ("torch._dynamo",)}
 

@@ -1,0 +1,198 @@
+"""HoloDreamer's three point clouds from an equirect RGB-D panorama: P0, P_f and P_s.
+
+P0 at ``p0_width`` (paper: the depth resolution); P_s at ``ps_width`` (the cloud the PCD set is
+projected from); P_f, the cloud the Gaussians start from, at ``pf_width`` (0 = as fine as a
+``view_size`` view resolves, capped at the panorama's width and ``pf_max_width``), built in this order
+on its equirect grid:
+
+1. sky (inf depth) on a far shell of radius ``sky_radius`` (0 = 2 x the 99th percentile of finite
+   depth), so the scene stays enclosed (holoflow/geometry/pointcloud.py);
+2. occlusion edges that the depth draws as ramps made steps (holoflow/geometry/edges.py);
+3. per-pixel depth noise smoothed within each surface, never across an edge, and each pixel's surface
+   normal (holoflow/geometry/surfaces.py): the Gaussians lie on their surfaces;
+4. points whose relative depth gradient exceeds ``grad_threshold`` dropped (the paper's filter, 0.4),
+   one-sided by default (``grad_sides``): with the ramps made steps, each side of an edge keeps its own
+   pixels, so a thin near object (a window bar, a lamp's stem) keeps its points;
+5. the background layer: the far surface and the sky shell continued under every silhouette, as wide
+   as an eye move of ``layer_baseline`` metres uncovers (holoflow/geometry/layers.py); where the
+   panorama shows sky, a sky dome behind everything (``sky_dome``): one coarse point per direction that
+   is not sky, just beyond the shell, coloured by the sky around it (``fill_from``), so that an eye
+   off the centre looking out of a window past its frame sees sky, never the void;
+6. sampled by area (``pf_sampling``; polar caps sampled finer where the panorama's poles hold detail:
+   holoflow/geometry/area.py).
+
+Colour is resampled antialiased, depth point-sampled (no invented edge depths). Colours returned are
+8-bit sRGB (the PLY convention, docs/conventions.md).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import torch
+
+from holoflow.geometry.area import (called_for, equirect_to_area_points, polar_caps, view_pixel_rad, view_width)
+from holoflow.geometry.config import PointCloudParams
+from holoflow.geometry.edges import snap_depth_edges
+from holoflow.geometry.layers import background_layer
+from holoflow.geometry.pointcloud import (depth_gradient_mask, equirect_to_points, far_shell_radius, resample_rgbd,
+                                          sky_to_shell)
+from holoflow.geometry.sampling import resize_equirect
+from holoflow.geometry.sphere import equirect_directions
+from holoflow.geometry.surfaces import smooth_depth, surface_normals
+
+
+@dataclass
+class Cloud:
+    """One point cloud: xyz [N, 3] (world metres), rgb [N, 3] (uint8 sRGB), normals [N, 3] (unit,
+    towards the centre) or None."""
+
+    xyz: torch.Tensor
+    rgb: torch.Tensor
+    normals: torch.Tensor | None = None
+
+
+@dataclass
+class Clouds:
+    """The three clouds, P_f's sampling record (pf.json: what the Gaussians' footprints need) and the
+    figures a run reports (meta)."""
+
+    clouds: dict[str, Cloud]
+    pf: dict
+    meta: dict = field(default_factory=dict)
+
+
+def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudParams, progress=None) -> Clouds:
+    """P0, P_f and P_s (module docstring) of rgb [H, W, 3] (linear) and radial_depth [Hd, Wd] (metres,
+    inf = sky). progress(done, total, what) is called after each cloud."""
+    depth = radial_depth.double()
+    sky_fraction = float((~(torch.isfinite(depth) & (depth > 0))).double().mean())
+    shell = cfg.sky_radius if cfg.sky_radius > 0 else far_shell_radius(depth)
+    srgb = _srgb(rgb)
+    pf_width = cfg.pf_width or min(rgb.shape[1], view_width(cfg.view_size, cfg.view_fov_deg), cfg.pf_max_width)
+    clouds, counts, extra = {}, {}, {}
+    for i, (name, width) in enumerate({"p0": cfg.p0_width, "pf": pf_width, "ps": cfg.ps_width}.items()):
+        col, d = resample_rgbd(srgb, depth, width)
+        sky = ~(torch.isfinite(d) & (d > 0))
+        d = sky_to_shell(d, shell)
+        if name == "pf":
+            clouds[name], extra = _pf_cloud(srgb, col, d, sky, shell, cfg)
+            counts.update(extra.pop("counts"))
+        else:
+            xyz, c = equirect_to_points(col, d)
+            clouds[name] = Cloud(xyz, _to_u8(c))
+        counts[name] = int(clouds[name].xyz.shape[0])
+        if progress is not None:
+            progress(i + 1, 3, "clouds")
+    pf = {"width": pf_width, "sampling": cfg.pf_sampling, "spacing_rad": 2 * math.pi / pf_width,
+          "view_pixel_rad": view_pixel_rad(cfg.view_size, cfg.view_fov_deg)}   # the footprint init's low-pass
+    if extra.get("caps") is not None:
+        pf["polar_caps"] = extra["caps"].to_json()
+    if counts.get("pf_layer"):     # the last points of pf.ply, on every layer_stride-th row and column
+        pf["layer"] = {"points": counts["pf_layer"], "spacing_rad": 2 * math.pi * cfg.layer_stride / pf_width}
+    if counts.get("pf_dome"):      # after the layer: the sky dome's points
+        pf["dome"] = {"points": counts["pf_dome"], "spacing_rad": 2 * math.pi / extra["dome_width"]}
+    meta = dict(pf_width=pf_width, pf_sampling=cfg.pf_sampling, points=counts, polar_caps=pf.get("polar_caps"),
+                polar_detail=extra.get("polar_detail"), sky_fraction=round(sky_fraction, 6),
+                shell_radius=round(shell, 6), grad_threshold=cfg.grad_threshold, depth_size=list(depth.shape))
+    return Clouds(clouds, pf, meta)
+
+
+def _pf_cloud(srgb: torch.Tensor, col: torch.Tensor, d: torch.Tensor, sky: torch.Tensor, shell: float,
+              cfg: PointCloudParams) -> tuple[Cloud, dict]:
+    """P_f from its grid col [h, w, 3] (sRGB) and d [h, w] (radial m, the sky [h, w] on its shell of
+    radius ``shell``), steps 2-6 of the module docstring: (the cloud, {"counts", "caps", "polar_detail",
+    "dome_width"})."""
+    d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
+    d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range)
+    normals = surface_normals(d, cfg.layer_tol)                                     # [h, w, 3]
+    keep = depth_gradient_mask(d, cfg.grad_threshold, cfg.grad_sides == "one_sided")
+    layer = None
+    if cfg.layer_baseline > 0:     # the far side continued under the silhouettes
+        layer = background_layer(col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg,
+                                 cfg.layer_stride, cfg.layer_slope)
+    d = torch.where(keep, d, torch.full_like(d, float("nan")))
+    caps, detail = None, None
+    if cfg.pf_sampling == "area":
+        caps = polar_caps(col.shape[1], srgb.shape[1], cfg.pf_polar_density, cfg.pf_polar_from_deg,
+                          cfg.pf_polar_upsample)
+        cap_rgb = None
+        if caps is not None:
+            cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)
+            caps, detail = called_for(caps, cap_rgb, col.shape[1], cfg.pf_polar_detail)
+            detail = {k: float(f"{v:.4g}") for k, v in detail.items()}
+        xyz, c, pixel = equirect_to_area_points(col, d, caps, cap_rgb if caps is not None else None)
+        n = normals.reshape(-1, 3)[pixel]
+    else:
+        xyz, c = equirect_to_points(col, d)
+        n = normals[torch.isfinite(d) & (d > 0)]
+    counts = {"pf_dropped_fraction": round(float((~keep).double().mean()), 6)}
+    if layer is not None:      # the layer continues a far surface seen head on from the centre: discs face it
+        lxyz, lc = equirect_to_points(layer[1], layer[0])
+        ldirs = equirect_directions(*layer[0].shape, dtype=lxyz.dtype)[torch.isfinite(layer[0]) & (layer[0] > 0)]
+        xyz, c, n = torch.cat([xyz, lxyz]), torch.cat([c, lc]), torch.cat([n, -ldirs.to(n.dtype)])
+        counts["pf_layer"] = int(len(lxyz))
+    dome_width = max(8, col.shape[1] // cfg.sky_dome_coarse)
+    if cfg.sky_dome and bool(sky.any()):
+        dxyz, dc = sky_dome(col, sky, shell * 1.05, dome_width)
+        n = torch.cat([n, -dxyz / torch.linalg.vector_norm(dxyz, dim=-1, keepdim=True)])
+        xyz, c = torch.cat([xyz, dxyz.to(xyz.dtype)]), torch.cat([c, dc.to(c.dtype)])
+        counts["pf_dome"] = int(len(dxyz))
+    return Cloud(xyz, _to_u8(c), n), {"counts": counts, "caps": caps, "polar_detail": detail,
+                                      "dome_width": dome_width}
+
+
+def sky_dome(rgb: torch.Tensor, sky: torch.Tensor, radius: float, width: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The sky dome (module docstring, step 5) of an equirect grid rgb [H, W, C] whose sky is sky [H, W]
+    (bool, at least one pixel): points xyz [M, 3] on a sphere of ``radius`` metres, one per pixel of a
+    ``width`` x ``width // 2`` grid whose direction the panorama does not see as sky, and their colour
+    [M, C]: the sky's own colours spread into the rest (``fill_from``)."""
+    h = max(1, width // 2)
+    small = resize_equirect(torch.cat([rgb * sky[..., None], sky[..., None].to(rgb.dtype)], -1).permute(2, 0, 1),
+                            h, width).permute(1, 2, 0)                                 # [h, w, C + 1]
+    weight = small[..., -1]
+    colour = fill_from(small[..., :-1] / weight.clamp_min(1e-12)[..., None], weight > 1e-3)
+    where = weight < 0.999                                                       # not all sky: the dome behind
+    dirs = equirect_directions(h, width, dtype=rgb.dtype)
+    return dirs[where] * radius, colour[where]
+
+
+def fill_from(values: torch.Tensor, known: torch.Tensor) -> torch.Tensor:
+    """values [H, W, C] with the pixels where known [H, W] is False filled from the known ones (pull-push:
+    averages over ever coarser grids, columns wrapping, then back down, each pixel taking the finest
+    level that knows it; the coarsest level's unknown pixels the mean). Every pixel is known when any is; otherwise values come back unchanged."""
+    if bool(known.all()) or not bool(known.any()):
+        return values
+    w = known.to(values.dtype)[..., None]
+    levels = [(values * w, w)]
+    while bool((levels[-1][1] == 0).any()) and min(levels[-1][1].shape[:2]) > 1:
+        v, w = levels[-1]
+        H, W = v.shape[:2]
+        if W % 2:                                                                      # wrap one column in
+            v, w = torch.cat([v, v[:, :1]], 1), torch.cat([w, w[:, :1]], 1)
+        if H % 2:
+            v, w = torch.cat([v, v[-1:]], 0), torch.cat([w, w[-1:]], 0)
+        levels.append((_sum_2x2(v), _sum_2x2(w)))
+    v, w = levels[-1]
+    mean = v.sum((0, 1)) / w.sum((0, 1)).clamp_min(1e-12)                               # what is left: the mean
+    out = torch.where(w > 0, v / w.clamp_min(1e-12), mean)
+    for v, w in reversed(levels[:-1]):
+        up = out.repeat_interleave(2, 0).repeat_interleave(2, 1)[: v.shape[0], : v.shape[1]]
+        out = torch.where(w > 0, v / w.clamp_min(1e-12), up)
+    return out
+
+
+def _sum_2x2(x: torch.Tensor) -> torch.Tensor:
+    """[2h, 2w, C] -> [h, w, C]: sums of 2 x 2 blocks."""
+    return x.reshape(x.shape[0] // 2, 2, x.shape[1] // 2, 2, -1).sum((1, 3))
+
+
+def _srgb(linear: torch.Tensor) -> torch.Tensor:
+    """[H, W, 3] linear light -> sRGB in [0, 1] (holoflow/imageops/color.py)."""
+    from holoflow.imageops.color import linear_to_srgb_torch
+
+    return linear_to_srgb_torch(linear.clamp(0, 1))
+
+
+def _to_u8(c: torch.Tensor) -> torch.Tensor:
+    return (c.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8)
