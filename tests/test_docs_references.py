@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 PAGES = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "README.md", ROOT / "CHANGELOG.md"]
 #: files the docs name as examples of what a user would write (docs/extending.md)
 EXAMPLES = {"stages/my_detail.py", "stages/my_stage.py", "stages/denoise.py"}
