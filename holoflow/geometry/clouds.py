@@ -104,7 +104,7 @@ def _pf_cloud(srgb: torch.Tensor, col: torch.Tensor, d: torch.Tensor, sky: torch
     radius ``shell``), steps 2-6 of the module docstring: (the cloud, {"counts", "caps", "polar_detail",
     "dome_width"})."""
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
-    d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range)
+    d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise)
     normals = surface_normals(d, cfg.layer_tol)                                     # [h, w, 3]
     keep = depth_gradient_mask(d, cfg.grad_threshold, cfg.grad_sides == "one_sided")
     layer = None

@@ -62,7 +62,11 @@ class PointCloudParams(StageParams):
                                "around each pixel, never across an edge (holoflow/geometry/surfaces.py); 0 = off",
                                "px", ge=0)
     smooth_range: float = param(0.05, "smooth_radius: relative depth difference at which a neighbour's weight "
-                                "falls to exp(-1/2) (steps of several times this are edges)", gt=0)
+                                "falls to exp(-1/2) (steps of several times this are edges), at most "
+                                "smooth_noise x the depth's own per-pixel noise", gt=0)
+    smooth_noise: float = param(3.0, "smooth_radius: the range as a multiple of the depth's per-pixel noise "
+                                "(holoflow/geometry/surfaces.py depth_noise; exact depth is then left nearly as "
+                                "it is); 0 = smooth_range always", ge=0)
     sky_dome: bool = param(True, "where the panorama shows sky, P_f gets a coarse sky dome behind everything, "
                            "coloured by the sky around it (holoflow/geometry/clouds.py): a window seen from off "
                            "the centre shows sky past its frame")

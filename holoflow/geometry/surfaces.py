@@ -9,8 +9,9 @@ neighbours then sit in front of and behind each other, and an eye off the centre
 between them. The filter averages log depth over a (2 radius + 1)^2 window with weights
 exp(-(delta log depth / range)^2 / 2) (a bilateral filter in log depth, columns wrapping at the seam,
 rows clamped at the poles): within a surface (neighbours within ``range`` relative) noise averages out,
-across an occlusion edge (a step of several ``range``) nothing mixes. Exact depth is nearly unchanged:
-log depth over a plane is smooth, so its window mean moves by the plane's curvature only.
+across an occlusion edge (a step of several ``range``) nothing mixes. ``range`` follows the depth's own
+noise (``depth_noise``): exact depth, whose only "noise" is the curvature of log depth over a plane,
+is left nearly unchanged (smoothing it would bend its creases), a network's is averaged.
 
 ``surface_normals``: the normal of each pixel's surface from the 3D points of its neighbours: along
 each image axis the one-sided difference towards the neighbour on the same surface (the smaller
@@ -37,12 +38,34 @@ def _shift(x: torch.Tensor, dy: int, dx: int) -> torch.Tensor:
     return torch.roll(x[rows], -dx, 1)
 
 
-def smooth_depth(radial_depth: torch.Tensor, radius: int = 2, range_rel: float = 0.05) -> torch.Tensor:
+def depth_noise(radial_depth: torch.Tensor, edge: float = 0.05) -> float:
+    """Per-pixel noise of radial_depth [H, W] as a relative standard deviation: the median absolute
+    difference between each pixel's log depth and the mean of its four neighbours (pixels with a surface,
+    differences under ``edge``: no occlusion edge), scaled to a Gaussian's standard deviation. Exact
+    depth of smooth surfaces scores its curvature (~1e-4 at P_f's sizes), a network's depth its noise."""
+    d = radial_depth
+    valid = torch.isfinite(d) & (d > 0)
+    logd = torch.log(torch.where(valid, d, torch.ones_like(d)))
+    around = sum(_shift(logd, dy, dx) for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0))) / 4
+    ok = valid & _shift(valid, 0, 1) & _shift(valid, 0, -1) & _shift(valid, 1, 0) & _shift(valid, -1, 0)
+    r = (logd - around)[ok].abs()
+    r = r[r < edge]
+    return float(1.4826 * r.median() / 1.25 ** 0.5) if r.numel() else 0.0
+
+
+def smooth_depth(radial_depth: torch.Tensor, radius: int = 2, range_rel: float = 0.05, noise_factor: float = 0.0
+                 ) -> torch.Tensor:
     """Edge-aware smoothing of radial_depth [H, W] (metres; module docstring): [H, W], same dtype.
     radius (px): half window (0: unchanged); range_rel: relative depth difference at which a
-    neighbour's weight falls to exp(-1/2). Pixels without a surface are neither changed nor used."""
+    neighbour's weight falls to exp(-1/2); with noise_factor > 0 it is at most noise_factor x the
+    depth's own noise (``depth_noise``), so exact depth is left nearly as it is and a network's noise
+    is averaged out. Pixels without a surface are neither changed nor used."""
     if radius < 1:
         return radial_depth
+    if noise_factor > 0:
+        range_rel = min(range_rel, noise_factor * depth_noise(radial_depth))
+        if range_rel <= 0:
+            return radial_depth
     d = radial_depth
     valid = torch.isfinite(d) & (d > 0)
     logd = torch.log(torch.where(valid, d, torch.ones_like(d)))
