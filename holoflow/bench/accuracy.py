@@ -32,7 +32,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES, stage_costs
+from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES, TRUTH, TRUTH_WAYS, stage_costs
 
 PROMPT = "a cozy wooden cabin at night"
 NEUTRAL = ["stylize.style=none", "detail.strength=0.0"]     # truth applies (the eval profile's choice)
@@ -469,6 +469,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--photos", default=str(PHOTOS),
                     help="--profiles: folder of 360 photos, each run as --use base_pano=PHOTO ('' = none)")
     ap.add_argument("--photo-prompt", default=PHOTO_PROMPT, help="--profiles: the prompt of the photo runs")
+    ap.add_argument("--truth", default="",
+                    help=f"--profiles: a truth set folder (docs/truth-sets.md, e.g. {TRUTH}) run --truth-ways ways and "
+                         "scored per ring (skipped with a note when absent)")
+    ap.add_argument("--truth-ways", default=",".join(TRUTH_WAYS),
+                    help=f"--profiles: comma list of {', '.join(TRUTH_WAYS)}: exact depth, the simulated network's "
+                         "depth, RGB only")
     ap.add_argument("--size", type=int, default=512, help="--profiles: viewing size, px")
     ap.add_argument("--fov", type=float, default=47.43, help="--profiles: viewing field of view, deg")
     ap.add_argument("--nr-cameras", type=int, default=12, help="--profiles: cameras NIQE / BRISQUE are taken at")
