@@ -135,7 +135,8 @@ def measure(case: Case, profile: str, args) -> tuple[dict, dict, dict]:
 
     t0 = time.monotonic()
     load = os.getloadavg()[0]
-    run_dir, summary = run_pipeline(case.prompt, profile, list(args.sets) + list(case.sets), args.store, list(case.uses))
+    run_dir, summary = run_pipeline(case.prompt, profile, list(args.sets) + list(case.sets), args.store,
+                                    list(case.uses))
     run_s = time.monotonic() - t0
     costs = stage_costs(Store(args.store), summary)
     info = Store(args.store).run_info(run_dir.name) or {}
@@ -242,7 +243,8 @@ def truth_table(rows: list[dict]) -> list[str]:
         lines.append(f"| {r['case']} | {r['profile']} | {_f(r['wall_s'], '{:.0f}')} | "
                      + " | ".join(_f(r.get(f"truth_psnr_{k}", math.nan)) for k in rings)
                      + f" | {_f(r.get('truth_abs_rel_0.5', math.nan), '{:.4f}')} | "
-                     f"{_f(100 * r.get('truth_empty_0.5', math.nan))} | {_f(100 * r.get('truth_cracked_0.5', math.nan))} |")
+                     f"{_f(100 * r.get('truth_empty_0.5', math.nan))} | "
+                     f"{_f(100 * r.get('truth_cracked_0.5', math.nan))} |")
     return lines + [""]
 
 

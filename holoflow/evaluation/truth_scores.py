@@ -125,8 +125,9 @@ def ring_table(scores: dict) -> list[str]:
     rows = [f"truth set {scores['truth']} ({scores['views']} views, {scores['size'][0]}x{scores['size'][1]} px); "
             f"{scores['gaussians']} Gaussians", head]
     for key, r in scores["rings"].items():
-        rows.append(f"  {key + ' m':>6s} {r['views']:5d} {_f(r['psnr'], '{:.2f}'):>8s} {_f(r['psnr_mean'], '{:.2f}'):>7s}"
-                    f" {_f(r['ssim'], '{:.4f}'):>7s} {_f(r['abs_rel'], '{:.4f}'):>7s} {_f(r['delta1'], '{:.4f}'):>7s}"
+        rows.append(f"  {key + ' m':>6s} {r['views']:5d} {_f(r['psnr'], '{:.2f}'):>8s}"
+                    f" {_f(r['psnr_mean'], '{:.2f}'):>7s} {_f(r['ssim'], '{:.4f}'):>7s}"
+                    f" {_f(r['abs_rel'], '{:.4f}'):>7s} {_f(r['delta1'], '{:.4f}'):>7s}"
                     f" {_f(100 * r['empty'], '{:.2f}'):>8s} {_f(100 * r['cracked'], '{:.2f}'):>8s}")
     rows.append("PSNR: pooled over the ring's pixels (mean: of the per-view values), sRGB; AbsRel / d<1.25: rendered "
                 f"camera z vs the views' Z (finite truth, alpha >= {EMPTY_ALPHA}); empty: alpha < {EMPTY_ALPHA}; "
@@ -136,10 +137,11 @@ def ring_table(scores: dict) -> list[str]:
 
 def ring_markdown(scores: dict) -> list[str]:
     """The ring table as markdown lines (rows = rings)."""
-    lines = ["| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | empty % | alpha < 0.9 % |", "|---|---|---|---|---|---|---|"]
+    lines = ["| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | empty % | alpha < 0.9 % |",
+             "|---|---|---|---|---|---|---|"]
     for key, r in scores["rings"].items():
-        lines.append(f"| {key} m | {_f(r['psnr'], '{:.2f}')} | {_f(r['ssim'], '{:.4f}')} | {_f(r['abs_rel'], '{:.4f}')} "
-                     f"| {_f(r['delta1'], '{:.4f}')} | {_f(100 * r['empty'], '{:.2f}')} | "
+        lines.append(f"| {key} m | {_f(r['psnr'], '{:.2f}')} | {_f(r['ssim'], '{:.4f}')} | "
+                     f"{_f(r['abs_rel'], '{:.4f}')} | {_f(r['delta1'], '{:.4f}')} | {_f(100 * r['empty'], '{:.2f}')} | "
                      f"{_f(100 * r['cracked'], '{:.2f}')} |")
     return lines
 

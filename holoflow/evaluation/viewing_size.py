@@ -181,24 +181,33 @@ def free_distance(depth: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
 
 
 def edge_targets(depth: torch.Tensor, cells: tuple[int, int] = (32, 12), max_lat_deg: float = 50.0,
-                 min_step: float = 0.05) -> tuple[torch.Tensor, torch.Tensor]:
+                 min_step: float = 0.05, max_width: int = 256) -> tuple[torch.Tensor, torch.Tensor]:
     """Points on the near side of the strong depth edges of a radial depth panorama depth [H, W]
     (metres; inf / NaN = sky): (points [M, 3] world metres, strength [M]).
 
-    Strength of a pixel = the largest |log depth| step to its right (wrapping) or lower neighbour, sky
-    taken as twice the farthest surface. The panorama is cut into cells[0] x cells[1] cells (longitude
-    x latitude within +-``max_lat_deg``); each cell whose strongest pixel steps by more than
+    The panorama is first brought to at most ``max_width`` px wide by the minimum over blocks (so an
+    edge a network blurred over a few pixels is one step). Strength of a pixel = the largest |log
+    depth| step to its right (wrapping) or lower neighbour less the mean of the two steps beside it
+    along the same axis (so a wall seen at a grazing angle, whose steps are all alike, has none), sky
+    taken as twice the farthest surface. The panorama is cut into cells[0] x cells[1] cells
+    (longitude x latitude within +-``max_lat_deg``); each cell whose strongest pixel steps by more than
     ``min_step`` gives that pixel's direction at the nearest depth of its 3 x 3 neighbourhood."""
     from holoflow.geometry.sphere import equirect_directions
 
-    H, W = depth.shape
-    d = depth.double()
+    d = torch.where(torch.isnan(depth), math.inf, depth).double()
+    f = max(1, depth.shape[1] // max_width)
+    if f > 1:                                                          # near side kept: min over f x f blocks
+        d = -torch.nn.functional.max_pool2d(-d[None, None], f)[0, 0]
+    H, W = d.shape
     finite = torch.isfinite(d) & (d > 0)
     far = 2 * float(d[finite].max()) if bool(finite.any()) else 1.0
     ld = torch.log(torch.where(finite, d, torch.full_like(d, far)))
-    right = (ld - torch.roll(ld, -1, 1)).abs()                                          # [H, W]
-    down = torch.nn.functional.pad((ld[:-1] - ld[1:]).abs(), (0, 0, 0, 1))              # [H, W]
-    strength = torch.maximum(right, down)
+    right = (ld - torch.roll(ld, -1, 1)).abs()                                          # [H, W] step to x + 1
+    down = torch.nn.functional.pad((ld[:-1] - ld[1:]).abs(), (0, 0, 0, 1))              # [H, W] step to y + 1
+    up, below = torch.nn.functional.pad(down[:-1], (0, 0, 1, 0)), torch.nn.functional.pad(down[1:], (0, 0, 0, 1))
+    jump_x = right - 0.5 * (torch.roll(right, 1, 1) + torch.roll(right, -1, 1))          # a slope's steps cancel
+    jump_y = down - 0.5 * (up + below)
+    strength = torch.maximum(jump_x, jump_y).clamp_min(0.0)
     near = -torch.nn.functional.max_pool2d(-torch.where(finite, d, torch.full_like(d, far))[None, None], 3, 1, 1)[0, 0]
     lat = 90.0 - 180.0 * (torch.arange(H, dtype=torch.float64) + 0.5) / H                # [H] degrees
     rows = torch.nonzero(lat.abs() <= max_lat_deg).flatten()
@@ -498,7 +507,8 @@ def table(scores: dict, profile: str | None) -> list[str]:
         goal = g.get("empty_0.5") if d == "0.5" else None
         row(f"novel {d} m empty % ({r['cameras']} cams, {r['offset_m']:.2f} m)", 100 * r["empty"], "{:.2f} %",
             None if goal is None else 100 * goal, at_most=True)
-        row(f"novel {d} m alpha < {s['crack_alpha']} %", 100 * r["cracked"], "{:.2f} %")
+        if "cracked" in r:
+            row(f"novel {d} m alpha < {s.get('crack_alpha', 0.9)} %", 100 * r["cracked"], "{:.2f} %")
         for key in ("niqe", "brisque"):
             x = (r.get("nr") or {}).get(key)
             if x is not None:
@@ -513,9 +523,9 @@ def table(scores: dict, profile: str | None) -> list[str]:
             "the poles (sRGB; pooled: the PSNR of their pooled squared error, which easy flat views do not lift); "
             f"zenith/nadir: the cameras within {s['pole_deg']} deg of them. NIQE / BRISQUE (lower is better): means "
             f"over {nr.get('cameras', 0)} of those cameras, render / source. Empty: alpha < {s['empty_alpha']}; "
-            f"novel eyes move horizontally (<= {s['wall_margin']} m short of the run's depth) and look sideways or back "
-            f"at the depth's edges ({scores.get('edge_targets', 0)} found), seed {s['seed']}; their NIQE / BRISQUE: "
-            "against the same source views.",
+            f"novel eyes move horizontally (<= {s['wall_margin']} m short of the run's depth) and look sideways or "
+            f"back at the depth's edges ({scores.get('edge_targets', 0)} found), seed {s['seed']}; their NIQE / "
+            "BRISQUE: against the same source views.",
             "Paper Table II (at 512 px, its own generated panoramas): PSNR 40.19 dB, SSIM 0.984."]
     return head + rows + [f"  note: {n}" for n in scores.get("notes", [])] + foot
 

@@ -27,8 +27,8 @@ def truth_sections(folder: Path) -> list[str]:
                 with Image.open(folder / name) as im:
                     img = np.asarray(im.convert("RGB"))
                 r = scores["rings"][key]
-                figs.append(Figure(f"ring {key} m: truth above render", image_uri(img),
-                                   f"{r['views']} views; PSNR {r['psnr']:.2f} dB, alpha < 0.9 {100 * r['cracked']:.2f} %"))
+                cap = f"{r['views']} views; PSNR {r['psnr']:.2f} dB, alpha < 0.9 {100 * r['cracked']:.2f} %"
+                figs.append(Figure(f"ring {key} m: truth above render", image_uri(img), cap))
         head = f'<h2 id="{esc(f.stem)}">walking: against the truth set {esc(Path(scores["truth"]).name)}</h2>'
         out.append("\n".join([head, f"<pre>{esc(chr(10).join(ring_table(scores)))}</pre>", *map(figure_html, figs)]))
     return out
