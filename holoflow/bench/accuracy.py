@@ -472,6 +472,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--truth", default="",
                     help=f"--profiles: a truth set folder (docs/truth-sets.md, e.g. {TRUTH}) run --truth-ways ways and "
                          "scored per ring (skipped with a note when absent)")
+    ap.add_argument("--scene-truth", action="store_true",
+                    help="--profiles: also score each procedural scene against a truth set ray cast from it "
+                         "(512 px views on rings 0 / 0.25 / 0.5 / 1 m, kept in the store's truth/ folder)")
     ap.add_argument("--truth-ways", default=",".join(TRUTH_WAYS),
                     help=f"--profiles: comma list of {', '.join(TRUTH_WAYS)}: exact depth, the simulated network's "
                          "depth, RGB only")

@@ -6,9 +6,10 @@ prompt each; the source is the detail panorama, and novel views have truth) and 
 folder (``holoflow run PHOTO_PROMPT --use base_pano=PHOTO``; the source is the photo itself) and on a
 truth set (``--truth DIR``, docs/truth-sets.md) run three ways (``TRUTH_WAYS``: exact depth, the
 simulated network's depth, RGB only), each also scored per ring against the truth set's views
-(holoflow.evaluation.truth_scores). Each
-finished run is scored by ``holoflow.evaluation.viewing_size.score_run`` at the viewing size (default 512 px at
-the paper's 47.43 deg) and timed by its stages' run records (wall and CPU seconds of computing each
+(holoflow.evaluation.truth_scores); with ``--scene-truth`` the procedural scenes are scored the same
+way against a truth set ray cast from each (``scene_truth_set``). Each finished run is scored by
+``holoflow.evaluation.viewing_size.score_run`` at the viewing size (default 512 px at the paper's
+47.43 deg) and timed by its stages' run records (wall and CPU seconds of computing each
 stage, also when served from the cache: what a fresh run costs). A profile the pipeline does not
 define, or one that needs a GPU or model weights absent here, is skipped with a line saying why:
 nothing is faked.
@@ -155,16 +156,30 @@ def measure(case: Case, profile: str, args) -> tuple[dict, dict, dict]:
                brisque=(nr.get("brisque") or {}).get("ratio", math.nan),
                **{f"empty_{d}": r["empty"] for d, r in nv.items()},
                **{f"novel_psnr_{d}": r.get("psnr", math.nan) for d, r in nv.items()})
-    if case.truth is not None:
+    truth_dir = case.truth
+    if truth_dir is None and case.kind == "scene" and getattr(args, "scene_truth", False):
+        truth_dir = scene_truth_set(run_dir, Path(args.store) / "truth" / case.name)
+    if truth_dir is not None:
         from holoflow.evaluation.truth_scores import score_truth
 
-        truth, rings = score_truth(run_dir / "transfer_opt" / "scene.ply", case.truth, args.backend)
+        truth, rings = score_truth(run_dir / "transfer_opt" / "scene.ply", truth_dir, args.backend)
         scores["truth"] = truth
         pictures["truth_rings"] = rings
         row["truth_score_s"] = round(truth["seconds"], 1)
         for key, r in truth["rings"].items():
             row.update({f"truth_{m}_{key}": r[m] for m in ("psnr", "ssim", "abs_rel", "empty", "cracked")})
     return row, scores, pictures
+
+
+def scene_truth_set(run_dir: Path, folder: Path) -> Path:
+    """The truth set of a procedural run's scene (base_pano/scene.json) in ``folder``, ray cast there
+    (holoflow.evaluation.truth_set.write_truth_set) unless it already holds one."""
+    if not (folder / "cameras.json").is_file():
+        from holoflow.evaluation.truth_set import write_truth_set
+        from holoflow.scene.model import Scene
+
+        write_truth_set(folder, Scene.from_json((run_dir / "base_pano" / "scene.json").read_text()))
+    return folder
 
 
 def goal_marks(row: dict) -> str:
