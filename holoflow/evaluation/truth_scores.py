@@ -146,15 +146,15 @@ def ring_markdown(scores: dict) -> list[str]:
     return lines
 
 
-def ring_strip(truth: torch.Tensor, render: torch.Tensor, side: int = 256, gap: int = 4) -> np.ndarray:
-    """One picture of a ring: its views side by side, each fitted into ``side`` px, truth above render:
-    uint8 [2 side + gap, V side + (V - 1) gap, 3]."""
+def ring_strip(truth: torch.Tensor, *renders: torch.Tensor, side: int = 256, gap: int = 4) -> np.ndarray:
+    """One picture of a ring: its views [V, H, W, 3] sRGB side by side, each fitted into ``side`` px, truth
+    above the renders (one row each): uint8 [(1 + R) side + R gap, V side + (V - 1) gap, 3]."""
     from holoflow.report.pictures import mosaic
 
     def u8(x):
         return (x.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8)
 
-    tiles = list(u8(truth)) + list(u8(render))
+    tiles = [t for images in (truth, *renders) for t in u8(images)]
     return mosaic(tiles, len(truth), side, gap=gap)
 
 

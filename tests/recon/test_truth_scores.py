@@ -132,3 +132,5 @@ def test_ring_strip_puts_truth_above_render():
     truth, render = torch.zeros(3, 8, 8, 3), torch.ones(3, 8, 8, 3)
     img = ts.ring_strip(truth, render, side=8, gap=2)
     assert img.shape == (18, 28, 3) and img[:8, :8].max() == 0 and img[10:, :8].min() == 255
+    two = ts.ring_strip(truth, render, truth, side=8, gap=2)
+    assert two.shape == (28, 28, 3) and two[20:, :8].max() == 0
