@@ -35,7 +35,6 @@ SCENES = ("a cozy wooden cabin at night", "a stone courtyard with a fountain")
 PHOTOS = ROOT.parent / "shared" / "data" / "photos"      # the issue's ../shared/data/photos
 PHOTO_PROMPT = "a room"
 PHOTO_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".hdr", ".exr")
-TRUTH = ROOT.parent / "shared" / "data" / "truth" / "grey_white_room"
 # way -> (--use, --set) of a truth set run (DIR = the truth set's folder); engine names: holoflow/depth/config.py
 TRUTH_WAYS = {
     "exact": (("base_pano=DIR/pano_z.exr", "metric_align=DIR/pano_z.exr"), ()),
