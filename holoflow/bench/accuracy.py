@@ -32,7 +32,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES, stage_costs
+from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES, TRUTH_WAYS, stage_costs
 
 PROMPT = "a cozy wooden cabin at night"
 NEUTRAL = ["stylize.style=none", "detail.strength=0.0"]     # truth applies (the eval profile's choice)
@@ -469,6 +469,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--photos", default=str(PHOTOS),
                     help="--profiles: folder of 360 photos, each run as --use base_pano=PHOTO ('' = none)")
     ap.add_argument("--photo-prompt", default=PHOTO_PROMPT, help="--profiles: the prompt of the photo runs")
+    ap.add_argument("--truth", default="",
+                    help="--profiles: a truth set folder (docs/truth-sets.md; e.g. "
+                         "../shared/data/truth/grey_white_room) run --truth-ways ways and scored per ring (skipped "
+                         "with a note when absent)")
+    ap.add_argument("--scene-truth", action="store_true",
+                    help="--profiles: also score each procedural scene against a truth set ray cast from it "
+                         "(512 px views on rings 0 / 0.25 / 0.5 / 1 m, kept in the store's truth/ folder)")
+    ap.add_argument("--truth-ways", default=",".join(TRUTH_WAYS),
+                    help=f"--profiles: comma list of {', '.join(TRUTH_WAYS)}: exact depth, the simulated network's "
+                         "depth, RGB only")
     ap.add_argument("--size", type=int, default=512, help="--profiles: viewing size, px")
     ap.add_argument("--fov", type=float, default=47.43, help="--profiles: viewing field of view, deg")
     ap.add_argument("--nr-cameras", type=int, default=12, help="--profiles: cameras NIQE / BRISQUE are taken at")

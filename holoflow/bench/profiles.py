@@ -3,16 +3,21 @@ where people look (issue 31).
 
 Each named profile runs, through the real runner into one shared store, on procedural scenes (a
 prompt each; the source is the detail panorama, and novel views have truth) and on the photos of a
-folder (``holoflow run PHOTO_PROMPT --use base_pano=PHOTO``; the source is the photo itself). Each
-finished run is scored by ``holoflow.evaluation.viewing_size.score_run`` at the viewing size (default 512 px at
-the paper's 47.43 deg) and timed by its stages' run records (wall and CPU seconds of computing each
+folder (``holoflow run PHOTO_PROMPT --use base_pano=PHOTO``; the source is the photo itself) and on a
+truth set (``--truth DIR``, docs/truth-sets.md) run three ways (``TRUTH_WAYS``: exact depth, the
+simulated network's depth, RGB only), each also scored per ring against the truth set's views
+(holoflow.evaluation.truth_scores); with ``--scene-truth`` the procedural scenes are scored the same
+way against a truth set ray cast from each (``scene_truth_set``). Each finished run is scored by
+``holoflow.evaluation.viewing_size.score_run`` at the viewing size (default 512 px at the paper's
+47.43 deg) and timed by its stages' run records (wall and CPU seconds of computing each
 stage, also when served from the cache: what a fresh run costs). A profile the pipeline does not
 define, or one that needs a GPU or model weights absent here, is skipped with a line saying why:
 nothing is faked.
 
 Writes a markdown block (the table with each profile's goals and pictures' links) into ``--doc``
 between ``BEGIN`` / ``END`` markers (the rest of the file is kept), pictures
-``viewing-<case>-<profile>-{base,novel}.jpg`` (JPEG 90: photographs) into ``--pictures``, and with
+``viewing-<case>-<profile>-{base,novel}.jpg`` (JPEG 90: photographs) and, for a truth set,
+``truth-<case>-<profile>-ring-<r>.jpg`` (truth above render) into ``--pictures``, and with
 ``--json`` every number.
 """
 from __future__ import annotations
@@ -30,6 +35,12 @@ SCENES = ("a cozy wooden cabin at night", "a stone courtyard with a fountain")
 PHOTOS = ROOT.parent / "shared" / "data" / "photos"      # the issue's ../shared/data/photos
 PHOTO_PROMPT = "a room"
 PHOTO_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".hdr", ".exr")
+# way -> (--use, --set) of a truth set run (DIR = the truth set's folder); engine names: holoflow/depth/config.py
+TRUTH_WAYS = {
+    "exact": (("base_pano=DIR/pano_z.exr", "metric_align=DIR/pano_z.exr"), ()),
+    "simulated": (("base_pano=DIR/pano_z.exr",), ("tangent_depth.engine=simulated", "metric_align.engine=simulated")),
+    "rgb": (("base_pano=DIR/pano.png",), ()),
+}
 BEGIN = "<!-- holoflow bench accuracy --profiles: begin (generated; edit outside these markers) -->"
 END = "<!-- holoflow bench accuracy --profiles: end -->"
 
@@ -39,9 +50,11 @@ class Case:
     """One input: ``name`` (file-name safe), the prompt, and ``uses`` (STAGE=PATH, as --use)."""
 
     name: str
-    kind: str                 # "scene" | "photo"
+    kind: str                 # "scene" | "photo" | "truth"
     prompt: str
     uses: tuple[str, ...] = ()
+    sets: tuple[str, ...] = ()
+    truth: Path | None = None   # a truth set to score the run against per ring
 
 
 def stage_costs(store, summary: dict) -> dict[str, dict]:
@@ -74,6 +87,24 @@ def cases(scenes: list[str], photos: Path | None, photo_prompt: str = PHOTO_PROM
     return out, notes
 
 
+def truth_cases(folder: Path | None, ways: list[str], prompt: str = PHOTO_PROMPT) -> tuple[list[Case], list[str]]:
+    """One Case per way of ``TRUTH_WAYS`` for the truth set in ``folder`` (named <set>-<way>), and notes
+    (no such truth set)."""
+    unknown = sorted(set(ways) - set(TRUTH_WAYS))
+    if unknown:
+        raise SystemExit(f"holoflow bench accuracy: unknown truth way(s) {unknown}; choose from {list(TRUTH_WAYS)}")
+    if folder is None:
+        return [], []
+    if not (folder / "cameras.json").is_file():
+        return [], [f"no truth set {folder} (cameras.json missing): truth set not measured"]
+    out = []
+    for way in ways:
+        uses, sets = TRUTH_WAYS[way]
+        out.append(Case(f"{slug(folder.name)}-{way}", "truth", prompt,
+                        tuple(u.replace("DIR", str(folder)) for u in uses), sets, folder))
+    return out, []
+
+
 def unavailable(pipe, profile: str) -> str | None:
     """Why ``profile`` cannot run here (not defined, needs a GPU, needs weights), or None."""
     from holoflow.flow import pipeline
@@ -104,7 +135,8 @@ def measure(case: Case, profile: str, args) -> tuple[dict, dict, dict]:
 
     t0 = time.monotonic()
     load = os.getloadavg()[0]
-    run_dir, summary = run_pipeline(case.prompt, profile, list(args.sets), args.store, list(case.uses))
+    run_dir, summary = run_pipeline(case.prompt, profile, list(args.sets) + list(case.sets), args.store,
+                                    list(case.uses))
     run_s = time.monotonic() - t0
     costs = stage_costs(Store(args.store), summary)
     info = Store(args.store).run_info(run_dir.name) or {}
@@ -123,7 +155,30 @@ def measure(case: Case, profile: str, args) -> tuple[dict, dict, dict]:
                brisque=(nr.get("brisque") or {}).get("ratio", math.nan),
                **{f"empty_{d}": r["empty"] for d, r in nv.items()},
                **{f"novel_psnr_{d}": r.get("psnr", math.nan) for d, r in nv.items()})
+    truth_dir = case.truth
+    if truth_dir is None and case.kind == "scene" and getattr(args, "scene_truth", False):
+        truth_dir = scene_truth_set(run_dir, Path(args.store) / "truth" / case.name)
+    if truth_dir is not None:
+        from holoflow.evaluation.truth_scores import score_truth
+
+        truth, rings = score_truth(run_dir / "transfer_opt" / "scene.ply", truth_dir, args.backend)
+        scores["truth"] = truth
+        pictures["truth_rings"] = rings
+        row["truth_score_s"] = round(truth["seconds"], 1)
+        for key, r in truth["rings"].items():
+            row.update({f"truth_{m}_{key}": r[m] for m in ("psnr", "ssim", "abs_rel", "empty", "cracked")})
     return row, scores, pictures
+
+
+def scene_truth_set(run_dir: Path, folder: Path) -> Path:
+    """The truth set of a procedural run's scene (base_pano/scene.json) in ``folder``, ray cast there
+    (holoflow.evaluation.truth_set.write_truth_set) unless it already holds one."""
+    if not (folder / "cameras.json").is_file():
+        from holoflow.evaluation.truth_set import write_truth_set
+        from holoflow.scene.model import Scene
+
+        write_truth_set(folder, Scene.from_json((run_dir / "base_pano" / "scene.json").read_text()))
+    return folder
 
 
 def goal_marks(row: dict) -> str:
@@ -144,7 +199,7 @@ def _f(x, fmt: str = "{:.2f}") -> str:
 
 
 def markdown(rows: list[dict], skipped: list[str], notes: list[str], args, machine: str,
-             pictures: dict[str, tuple[str, str]]) -> str:
+             pictures: dict[str, tuple[str, ...]]) -> str:
     """The generated block: the table, the goals, the skipped profiles and links to the pictures."""
     from holoflow.evaluation.viewing_size import GOALS
 
@@ -170,15 +225,41 @@ def markdown(rows: list[dict], skipped: list[str], notes: list[str], args, machi
     lines += ["", "Goals (issue 31): " + "; ".join(
         f"{p}: " + ", ".join(f"{k} {'>=' if k == 'psnr' else '<='} {v}" for k, v in g.items())
         for p, g in GOALS.items()) + " (NIQE / BRISQUE as ratios, empty as a fraction).", ""]
+    lines += truth_table(rows)
     lines += [f"- skipped: {s}" for s in skipped] + [f"- note: {n}" for n in notes]
     if pictures:
         lines += ["", f"Pictures (left source, right render, centre 256 px of the {args.size} px views at 1:1; "
                   "novel views 0.5 m off centre with empty pixels in magenta):", ""]
         rel = Path(os.path.relpath(args.pictures, args.doc.parent)) if args.doc else Path(args.pictures)
-        for key, (base, novel) in pictures.items():
+        for key, names in pictures.items():
+            if len(names) == 1:
+                lines.append(f"- {key}: [truth above render]({(rel / names[0]).as_posix()})")
+                continue
+            base, novel = names
             lines.append(f"- {key}: [base cameras]({(rel / base).as_posix()}), "
                          f"[novel 0.5 m]({(rel / novel).as_posix()})")
     return "\n".join(lines + ["", END]) + "\n"
+
+
+def truth_table(rows: list[dict]) -> list[str]:
+    """Markdown lines: the truth-set rows' per-ring PSNR (dB), AbsRel and cracked fraction at 0.5 m, and
+    seconds ([] when no row has a truth score)."""
+    rows = [r for r in rows if "truth_psnr_0" in r]
+    if not rows:
+        return []
+    rings = sorted({k[len("truth_psnr_"):] for r in rows for k in r if k.startswith("truth_psnr_")}, key=float)
+    lines = ["Truth set (`--truth`): the scene at the truth views' cameras (512 px, 47.43 deg) against their "
+             "ray-cast truth, PSNR pooled over each ring's 8 views (sRGB); AbsRel of the rendered depth, empty "
+             "(alpha < 0.5) and cracked (alpha < 0.9) at 0.5 m:", "",
+             "| input | profile | fresh run s | " + " | ".join(f"{k} m dB" for k in rings)
+             + " | AbsRel 0.5 m | empty 0.5 m % | alpha < 0.9 at 0.5 m % |", "|" + "---|" * (len(rings) + 6)]
+    for r in rows:
+        lines.append(f"| {r['case']} | {r['profile']} | {_f(r['wall_s'], '{:.0f}')} | "
+                     + " | ".join(_f(r.get(f"truth_psnr_{k}", math.nan)) for k in rings)
+                     + f" | {_f(r.get('truth_abs_rel_0.5', math.nan), '{:.4f}')} | "
+                     f"{_f(100 * r.get('truth_empty_0.5', math.nan))} | "
+                     f"{_f(100 * r.get('truth_cracked_0.5', math.nan))} |")
+    return lines + [""]
 
 
 def replace_block(text: str, block: str) -> str:
@@ -207,12 +288,18 @@ def main(args) -> int:
     from holoflow.evaluation.machine import machine
     from holoflow.flow import pipeline
     from holoflow.report.pictures import encode
+    from holoflow.evaluation.truth_scores import ring_strip
     from holoflow.report.viewing_section import base_picture, novel_picture
 
     pipe = pipeline.load(ROOT / "pipeline.yaml")
     profiles = [p for p in args.profiles.split(",") if p]
     photos = Path(args.photos) if args.photos else None
     todo, notes = cases([s for s in args.scenes.split(";") if s], photos, args.photo_prompt)
+    more, why = truth_cases(Path(args.truth) if args.truth else None, [w for w in args.truth_ways.split(",") if w],
+                            args.photo_prompt)
+    todo, notes = todo + more, notes + why
+    for n in why:
+        print(f"accuracy: {n}", file=sys.stderr, flush=True)
     skipped, runnable = [], []
     for p in profiles:
         why = unavailable(pipe, p)
@@ -237,6 +324,10 @@ def main(args) -> int:
                 if "0.5" in scores["novel"]:
                     (args.pictures / names[1]).write_bytes(encode(novel_picture(scores, pictures)[0], "jpeg", 90))
                 pics[f"{case.name} ({p})"] = names
+                for key, (truth, render) in pictures.get("truth_rings", {}).items():
+                    name = f"truth-{case.name}-{p}-ring-{key}.jpg"
+                    (args.pictures / name).write_bytes(encode(ring_strip(truth, render, side=192), "jpeg", 90))
+                    pics[f"{case.name} ({p}) truth | render {key} m"] = (name,)
             write(args, markdown(rows, skipped, notes, args, machine(), pics), everything, skipped, notes)
     block = markdown(rows, skipped, notes, args, machine(), pics)
     write(args, block, everything, skipped, notes)

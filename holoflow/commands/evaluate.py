@@ -1,164 +1,30 @@
-"""``holoflow eval``: score the two-stage reconstruction on procedural scenes, where truth is exact.
+"""``holoflow eval``: scoring reconstructions, in two modes with their own flags (``--help`` of each lists them):
 
-For each prompt (a procedural scene) and each variant (the full method and the paper's ablations) it
-runs the pipeline in an evaluation profile (appearance stages neutral, so the panorama is the scene's
-true appearance up to resampling) and scores G0 (pre_opt) and G1 (transfer_opt):
-
-- ``base``: PSNR / SSIM at the base cameras against the PANO set (the paper's protocol);
-- ``supp``: PSNR / SSIM at the supplementary cameras against true renders of the scene;
-- ``novel``: PSNR / SSIM at seeded random cameras off the centre against true renders;
-- ``empty``: fraction of pixels with rendered alpha < 0.5 at the supplementary and novel cameras;
-- ``supp_nr``: the paper's rendering-robustness scores (Table II / III): NIQE and BRISQUE
-  (holoflow.quality.nriqa) of each model rendered at the scored supplementary cameras at ``--nr-size`` px
-  (the paper's views are 512 px), means over the cameras;
-- LPIPS, TReS, MANIQA: learned networks with no weights here, reported as unavailable (never
-  approximated).
-
-``--run RUN`` (a run id or ``latest``) scores any finished run, procedural or a user's own panorama
-(``holoflow run ... --use base_pano=photo.jpg``), at the viewing size (default 512 px at the paper's
-47.43 deg; holoflow.evaluation.viewing_size): the final scene at the base cameras against the source's own
-views (the photo itself for a photo), the zenith / nadir cameras apart, NIQE / BRISQUE ratios render /
-source, and the empty fraction of novel cameras 0.25 / 0.5 / 1 m off centre, beside issue 31's goals.
-
-Every report names the engines that made the depth (``depth_engines``): on procedural scenes that is
-the ``simulated`` engine, which reads the scene's true depth, so no figure here is a learned
-network's.
-
-Images are compared in sRGB [0, 1] (the space Gaussians are trained in, holoflow.recon.views).
-Variants: ``full``; ``no_depth_filter`` (point_cloud.grad_threshold = 1e6: no point is dropped; the
-store's canonical JSON has no infinity); ``no_pcd_phase`` (pre_opt.pcd_iters = 0); ``no_pcd_and_filter`` (both); ``no_inp`` (transfer_opt.use_inp = false:
-transfer on the PANO set only). The paper's Table III rows are full, w/o initial (= no_pcd_phase),
-w/o filter (= no_depth_filter) and w/o initial & filter (= no_pcd_and_filter).
+  holoflow eval run RUN [--truth DIR] ...   one finished run (an id or 'latest', a photo's included) where a
+                                            viewer looks, against a truth set when given
+                                            (holoflow.commands.evaluate_run); also: holoflow eval --run RUN
+  holoflow eval scenes [PROMPT ...] ...     procedural scenes, the full method and the paper's ablations: the
+                                            paper's tables (holoflow.commands.evaluate_scenes); also:
+                                            holoflow eval [PROMPT ...]
 """
 from __future__ import annotations
 
-import argparse
-import json
-import sys
-import time
-from pathlib import Path
-
-from holoflow.evaluation.machine import machine
-from holoflow.evaluation.runs import depth_engines, open_store, run_pipeline
-from holoflow.evaluation.scores import evaluate_run, strip_image
-from holoflow.evaluation.tables import PAPER_TABLE2, PAPER_TABLE3, VARIANTS, _fmt, markdown, mean_tree, picture_name
-
-
-PROMPTS = ["a cozy wooden cabin at night", "a sunny beach with palm trees",
-           "a modern living room with a sofa and a lamp", "a stone courtyard with a fountain"]
-
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="holoflow eval", description=__doc__.split("\n\n")[0])
-    p.add_argument("prompts", nargs="*", default=PROMPTS, help="procedural scenes (default: 4 built-in prompts)")
-    p.add_argument("--profile", default="eval")
-    p.add_argument("--set", dest="sets", action="append", default=[], help="stage.param=value, applied to every run")
-    p.add_argument("--variants", default="all", help=f"comma list of {', '.join(VARIANTS)} (default all)")
-    p.add_argument("--novel", type=int, default=24, help="random novel cameras per scene")
-    p.add_argument("--offset", type=float, default=0.3, help="novel eye offset, max fraction of the free distance")
-    p.add_argument("--supp", type=int, default=16, help="supplementary cameras scored per scene (seeded subset; 0 = all)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the novel and scored supplementary cameras")
-    p.add_argument("--repeats", type=int, default=1,
-                   help="train pre_opt and transfer_opt this many times (train_seed 0..N-1) on the same "
-                        "upstream artifacts; tables show means, the G1 - G0 table the spread")
-    p.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
-    p.add_argument("--store", type=Path, default=None)
-    p.add_argument("--nr-size", type=int, default=512,
-                   help="px side of the supplementary-camera renders scored by NIQE / BRISQUE (paper: 512; "
-                        "NIQE needs >= 192; 0 = skip)")
-    p.add_argument("--run", default=None,
-                   help="score a finished run of the store (id or 'latest'; any base panorama, a photo given "
-                        "by --use included) at the viewing size (--size, --fov): base cameras vs the source's "
-                        "own views (the photo itself for --use base_pano=FILE), zenith / nadir, NIQE / BRISQUE "
-                        "ratios, novel cameras' empty fraction, printed with the goals; no pipeline is run, "
-                        "prompts / --variants / --out / --images / --supp / --nr-size are not used")
-    p.add_argument("--size", type=int, default=512, help="--run: viewing size, px square (paper 512)")
-    p.add_argument("--fov", type=float, default=47.43, help="--run: horizontal field of view, deg (paper 47.43)")
-    p.add_argument("--nr-cameras", type=int, default=12,
-                   help="--run: NIQE / BRISQUE at this many seeded non-polar base cameras (0 = all)")
-    p.add_argument("--out", type=Path, default=Path("docs/eval.md"), help="markdown report")
-    p.add_argument("--json", type=Path, default=None, help="also write every number as JSON")
-    p.add_argument("--images", type=Path, default=None,
-                   help="folder for truth/G0/G1 pictures (default: images/ beside --out)")
-    args = p.parse_args(argv)
-    args.images = args.images if args.images is not None else args.out.parent / "images"
-    variants = list(VARIANTS) if args.variants == "all" else args.variants.split(",")
-    from holoflow.quality.nriqa import NIQE_MIN_SIDE
+    import sys
 
-    if args.nr_size and args.nr_size < NIQE_MIN_SIDE:
-        print(f"holoflow eval: --nr-size must be 0 or >= {NIQE_MIN_SIDE} (NIQE's patch covariance needs 2 x 2 "
-              "patches of 96 px)", file=sys.stderr)
-        return 2
-    if args.run:
-        return main_run(args)
-    if args.repeats < 1:
-        print("holoflow eval: --repeats must be >= 1", file=sys.stderr)
-        return 2
-    unknown = [v for v in variants if v not in VARIANTS]
-    if unknown:
-        print(f"holoflow eval: unknown variant(s) {unknown}; choose from {list(VARIANTS)}", file=sys.stderr)
-        return 2
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] in (["-h"], ["--help"]):
+        print(__doc__.strip())
+        return 0
+    if argv[:1] == ["run"]:
+        from holoflow.commands import evaluate_run
 
-    from holoflow.quality import metrics
-    from holoflow.io.image import write_png
+        return evaluate_run.main(argv[1:])
+    if any(a == "--run" or a.startswith("--run=") for a in argv):
+        from holoflow.commands import evaluate_run
 
-    results: dict = {}
-    cache: dict = {}
-    for prompt in args.prompts:
-        results[prompt] = {}
-        for variant in variants:
-            runs = []
-            for k in range(args.repeats):
-                t0 = time.monotonic()
-                seeds = [f"pre_opt.train_seed={k}", f"transfer_opt.train_seed={k}"] if k else []
-                run_dir, _ = run_pipeline(prompt, args.profile, args.sets + VARIANTS[variant] + seeds, args.store)
-                r = evaluate_run(run_dir, args.novel, args.offset, args.supp, args.seed, args.backend,
-                                 args.nr_size, cache)
-                renders = r.pop("_renders")
-                r["seconds"] = time.monotonic() - t0
-                runs.append(r)
-                if variant == "full" and k == 0:
-                    args.images.mkdir(parents=True, exist_ok=True)
-                    write_png(args.images / picture_name(prompt), strip_image(renders))
-                print(f"eval: {prompt!r} {variant} train_seed {k}: G0 novel {_fmt(r['G0']['novel']['psnr'])} dB, "
-                      f"G1 novel {_fmt(r['G1']['novel']['psnr'])} dB, G1 base {_fmt(r['G1']['base']['psnr'])} dB",
-                      file=sys.stderr)
-            results[prompt][variant] = dict(mean_tree(runs), repeats=runs, engines=runs[0]["engines"],
-                                            run=run_dir.name)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(markdown(results, args, metrics.availability(), machine()))
-    if args.json:
-        args.json.write_text(json.dumps(dict(results=results, paper=dict(table2=PAPER_TABLE2, table3=PAPER_TABLE3),
-                                             availability=metrics.availability(), nr_size=args.nr_size),
-                                        indent=1, sort_keys=True))
-    print(f"eval: report in {args.out}", file=sys.stderr)
-    return 0
+        return evaluate_run.main(argv, prog="holoflow eval --run")
+    from holoflow.commands import evaluate_scenes
 
-
-def main_run(args) -> int:
-    """``holoflow eval --run RUN``: score one finished run at the viewing size (holoflow.evaluation.viewing_size:
-    base cameras vs the source's own views, zenith / nadir, NIQE / BRISQUE ratios, novel cameras'
-    empty fraction), print the table with issue 31's goals (and with --json write every number)."""
-    from holoflow.evaluation.viewing_size import ViewingSpec, score_run, table
-
-    st = open_store(args.store)
-    run_id = st.latest_run_id() if args.run == "latest" else args.run
-    run_dir = st.run_dir(run_id) if run_id else None
-    if run_dir is None or not (run_dir / "transfer_opt" / "scene.ply").is_file():
-        print(f"holoflow eval: no finished run {args.run!r} (with transfer_opt/scene.ply) in {st.root}; "
-              f"runs there: {', '.join(st.run_ids()[-5:]) or 'none'}", file=sys.stderr)
-        return 2
-    t0 = time.monotonic()
-    info = st.run_info(run_id) or {}
-    spec = ViewingSpec(size=args.size, fov_deg=args.fov, nr_cameras=args.nr_cameras, seed=args.seed,
-                       backend=args.backend)
-    r, _ = score_run(run_dir, info, spec)
-    r.update(run=run_id, prompt=info.get("prompt"), profile=info.get("profile"), engines=depth_engines(run_dir),
-             seconds_total=time.monotonic() - t0)
-    print(f"run {run_id} ({info.get('profile')}), depth made by: "
-          + ", ".join(f"{k}={v}" for k, v in r["engines"].items()))
-    print("\n".join(table(r, info.get("profile"))))
-    print(f"scored in {r['seconds_total']:.1f} s")
-    if args.json:
-        args.json.write_text(json.dumps(r, indent=1, sort_keys=True))
-    return 0
+    return evaluate_scenes.main(argv[1:] if argv[:1] == ["scenes"] else argv)

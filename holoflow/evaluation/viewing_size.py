@@ -18,8 +18,11 @@ The paper's Table II protocol taken where a viewer looks, not at the training si
   views at a seeded subset of ``nr_cameras`` non-polar cameras (0 = all), and their ratio
   render / source (a photo has its own score; 1.0 = as natural as the source).
 - **novel**: ``per_distance`` cameras at each distance of ``distances`` metres off the centre
-  (``novel_rig``), each scored by its EMPTY fraction (pixels whose rendered alpha < ``empty_alpha``)
-  and, where truth exists (a procedural base_pano with its scene.json), PSNR against the true render.
+  (``novel_rig``: eyes moved in several directions, looking sideways or back at the strong edges of
+  the run's depth, ``edge_targets``), each scored by its EMPTY fraction (pixels whose rendered alpha <
+  ``empty_alpha``), its CRACKED fraction (alpha < ``crack_alpha``), NIQE / BRISQUE of the renders
+  against the source's views of ``nr`` (``novel_nr``; sizes >= 192 px) and, where truth exists (a
+  procedural base_pano with its scene.json), PSNR against the true render.
 
 Everything here is a pure function of the run's files; ``holoflow eval --run`` prints ``table``.
 """
@@ -47,12 +50,14 @@ class ViewingSpec:
     supersample: int = 2
     nr_cameras: int = 12
     empty_alpha: float = 0.5
+    crack_alpha: float = 0.9
     distances: tuple[float, ...] = (0.25, 0.5, 1.0)
     per_distance: int = 8
     pitch_deg: float = 30.0
     wall_margin: float = 0.3
     seed: int = 0
     backend: str = "cpu"
+    novel_nr: bool = True
 
 
 # Goals of issue 31 per profile: psnr (dB, at least), brisque / niqe (ratio render / source, at most),
@@ -175,17 +180,86 @@ def free_distance(depth: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
     return sample_equirect(d[None], dirs[None].double(), mode="nearest")[0, 0]    # [N]
 
 
+def edge_targets(depth: torch.Tensor, cells: tuple[int, int] = (32, 12), max_lat_deg: float = 50.0,
+                 min_step: float = 0.05, max_width: int = 256) -> tuple[torch.Tensor, torch.Tensor]:
+    """Points on the near side of the strong depth edges of a radial depth panorama depth [H, W]
+    (metres; inf / NaN = sky): (points [M, 3] world metres, strength [M]).
+
+    The panorama is first brought to at most ``max_width`` px wide by the minimum over blocks (so an
+    edge a network blurred over a few pixels is one step). Strength of a pixel = the largest |log
+    depth| step to its right (wrapping) or lower neighbour less the mean of the two steps beside it
+    along the same axis (so a wall seen at a grazing angle, whose steps are all alike, has none), sky
+    taken as twice the farthest surface. The panorama is cut into cells[0] x cells[1] cells
+    (longitude x latitude within +-``max_lat_deg``); each cell whose strongest pixel steps by more than
+    ``min_step`` gives that pixel's direction at the nearest depth of its 3 x 3 neighbourhood."""
+    from holoflow.geometry.sphere import equirect_directions
+
+    d = torch.where(torch.isnan(depth), math.inf, depth).double()
+    f = max(1, depth.shape[1] // max_width)
+    if f > 1:                                                          # near side kept: min over f x f blocks
+        d = -torch.nn.functional.max_pool2d(-d[None, None], f)[0, 0]
+    H, W = d.shape
+    finite = torch.isfinite(d) & (d > 0)
+    far = 2 * float(d[finite].max()) if bool(finite.any()) else 1.0
+    ld = torch.log(torch.where(finite, d, torch.full_like(d, far)))
+    right = (ld - torch.roll(ld, -1, 1)).abs()                                          # [H, W] step to x + 1
+    down = torch.nn.functional.pad((ld[:-1] - ld[1:]).abs(), (0, 0, 0, 1))              # [H, W] step to y + 1
+    up, below = torch.nn.functional.pad(down[:-1], (0, 0, 1, 0)), torch.nn.functional.pad(down[1:], (0, 0, 0, 1))
+    jump_x = right - 0.5 * (torch.roll(right, 1, 1) + torch.roll(right, -1, 1))          # a slope's steps cancel
+    jump_y = down - 0.5 * (up + below)
+    strength = torch.maximum(jump_x, jump_y).clamp_min(0.0)
+    near = -torch.nn.functional.max_pool2d(-torch.where(finite, d, torch.full_like(d, far))[None, None], 3, 1, 1)[0, 0]
+    lat = 90.0 - 180.0 * (torch.arange(H, dtype=torch.float64) + 0.5) / H                # [H] degrees
+    rows = torch.nonzero(lat.abs() <= max_lat_deg).flatten()
+    r0, r1 = int(rows.min()), int(rows.max()) + 1
+    dirs = equirect_directions(H, W, dtype=torch.float64)                                # [H, W, 3]
+    pts, strg = [], []
+    for i in range(cells[1]):
+        for j in range(cells[0]):
+            ys = slice(r0 + (r1 - r0) * i // cells[1], r0 + (r1 - r0) * (i + 1) // cells[1])
+            xs = slice(W * j // cells[0], W * (j + 1) // cells[0])
+            s = strength[ys, xs]
+            if s.numel() == 0:
+                continue
+            k = int(s.argmax())
+            y, x = ys.start + k // s.shape[1], xs.start + k % s.shape[1]
+            if float(s.max()) > min_step and float(near[y, x]) < far:
+                pts.append(dirs[y, x] * near[y, x])
+                strg.append(float(s.max()))
+    if not pts:
+        return torch.zeros(0, 3, dtype=torch.float64), torch.zeros(0, dtype=torch.float64)
+    return torch.stack(pts), torch.tensor(strg, dtype=torch.float64)
+
+
+def turn_deg(per_distance: int) -> torch.Tensor:
+    """Where camera k of ``novel_rig`` prefers to look with edge targets, degrees from its move
+    direction (positive to the right): 90 (right) to 270 (left) through 180 (back), spread over the
+    cameras in a seed-free order that alternates sides: [per_distance] float64."""
+    steps = torch.arange(per_distance, dtype=torch.float64)
+    spread = 90.0 + 180.0 * steps / max(per_distance - 1, 1)                             # 90 .. 270
+    order = torch.tensor([(k * 3) % per_distance for k in range(per_distance)]) if per_distance % 3 else steps.long()
+    return spread[order]
+
+
 def novel_rig(distances: tuple[float, ...], per_distance: int, seed: int, free=None,
-              pitch_deg: float = 30.0, margin: float = 0.3) -> tuple[torch.Tensor, torch.Tensor]:
+              pitch_deg: float = 30.0, margin: float = 0.3, targets=None,
+              min_turn_deg: float = 60.0, window_deg: float = 45.0) -> tuple[torch.Tensor, torch.Tensor]:
     """Novel cameras off the centre: (viewmats [D * per_distance, 4, 4] float32, offsets [D * per] m).
 
     For camera k of a distance d: the eye moves horizontally (at the centre's height) along azimuth
     phi + 2 pi k / per_distance (phi seeded, uniform in one step) by d metres, shortened to ``margin``
     metres in front of the first surface along that direction when ``free`` (a function: unit
     directions [N, 3] -> metres [N], e.g. ``free_distance`` on the run's depth) says it is nearer.
-    It looks, by k mod 4: along its move (toward the wall it approached), 90 deg right of it, back
-    across the centre, 90 deg left, tilted by a seeded pitch uniform in [-pitch_deg, pitch_deg]. The
-    same directions serve every distance, so distances compare like for like."""
+
+    Without ``targets`` it looks, by k mod 4: along its move (toward the wall it approached), 90 deg
+    right of it, back across the centre, 90 deg left, tilted by a seeded pitch uniform in [-pitch_deg,
+    pitch_deg]. With ``targets`` = (points [M, 3], strength [M]) (``edge_targets``: the near sides of
+    the depth edges, where a step uncovers what the centre never saw) it looks at one of them: among
+    the points whose azimuth from the centre is within ``window_deg`` of ``turn_deg(k)`` off its move
+    and at least ``min_turn_deg`` away from the move (sideways or back), the one with the largest
+    strength x a seeded factor uniform in [0.5, 1]; a camera with no such point keeps the direction
+    ``turn_deg(k)`` with its seeded pitch. The same targets serve every distance, so distances
+    compare like for like."""
     from holoflow.geometry.camera import look_at
 
     g = torch.Generator().manual_seed(seed)
@@ -193,23 +267,60 @@ def novel_rig(distances: tuple[float, ...], per_distance: int, seed: int, free=N
     pitch = (torch.rand(per_distance, generator=g, dtype=torch.float64) * 2 - 1) * math.radians(pitch_deg)
     az = phi + 2 * math.pi * torch.arange(per_distance, dtype=torch.float64) / per_distance   # [P]
     move = torch.stack([torch.sin(az), torch.zeros_like(az), torch.cos(az)], 1)              # [P, 3] +y is down
-    turn = az + (math.pi / 2) * (torch.arange(per_distance) % 4).double()
+    if targets is None:
+        turn = az + (math.pi / 2) * (torch.arange(per_distance) % 4).double()
+    else:
+        turn = az + torch.deg2rad(turn_deg(per_distance))
     look = torch.stack([torch.sin(turn) * torch.cos(pitch), -torch.sin(pitch), torch.cos(turn) * torch.cos(pitch)], 1)
+    aim = None
+    if targets is not None:
+        aim = pick_targets(targets, move, turn, g, min_turn_deg, window_deg)               # [P, 3], NaN = none
     room = torch.full((per_distance,), math.inf, dtype=torch.float64) if free is None else free(move).double()
     vms, offs = [], []
     for d in distances:
         off = torch.clamp(torch.minimum(torch.full_like(room, float(d)), room - margin), min=0.0)   # [P]
         eye = move * off[:, None]
-        vms.append(look_at(eye, eye + look))
+        at = eye + look
+        if aim is not None:
+            ok = torch.isfinite(aim).all(1) & ((aim - eye).norm(dim=1) > margin)
+            at = torch.where(ok[:, None], torch.nan_to_num(aim), at)
+        vms.append(look_at(eye, at))
         offs.append(off)
     return torch.cat(vms).float(), torch.cat(offs)
 
 
+def pick_targets(targets, move: torch.Tensor, turn: torch.Tensor, g: torch.Generator, min_turn_deg: float,
+                 window_deg: float) -> torch.Tensor:
+    """The edge point each camera looks at (``novel_rig``): points [M, 3] and strength [M] of
+    ``targets``, unit moves [P, 3], preferred azimuths turn [P] radians -> [P, 3] (NaN rows: no point
+    qualifies). Consumes P x M seeded uniforms from ``g``."""
+    pts, strength = targets
+    pts, strength = pts.double(), strength.double()
+    P, M = len(move), len(pts)
+    jitter = 0.5 + 0.5 * torch.rand(P, M, generator=g, dtype=torch.float64)                 # [P, M]
+    out = torch.full((P, 3), math.nan, dtype=torch.float64)
+    if M == 0:
+        return out
+    flat = pts * torch.tensor([1.0, 0.0, 1.0], dtype=torch.float64)
+    flat = flat / flat.norm(dim=1, keepdim=True).clamp_min(1e-9)                             # [M, 3] horizontal
+    taz = torch.atan2(flat[:, 0], flat[:, 2])                                                # [M]
+    off_pref = torch.remainder(taz[None] - turn[:, None] + math.pi, 2 * math.pi) - math.pi     # [P, M]
+    cos_move = flat @ move.T                                                                 # [M, P]
+    ok = (off_pref.abs() <= math.radians(window_deg)) & (cos_move.T <= math.cos(math.radians(min_turn_deg)))
+    score = torch.where(ok, strength[None] * jitter, torch.full_like(jitter, -1.0))
+    best = score.argmax(1)                                                                   # [P]
+    has = ok.any(1)
+    out[has] = pts[best[has]]
+    return out
+
+
 def novel_scores(alpha: torch.Tensor, offsets: torch.Tensor, distances: tuple[float, ...], empty_alpha: float,
-                 renders: torch.Tensor | None = None, truth: torch.Tensor | None = None) -> dict:
+                 renders: torch.Tensor | None = None, truth: torch.Tensor | None = None,
+                 crack_alpha: float = 0.9) -> dict:
     """Per distance (key f"{d:g}"): empty = fraction of the pixels of its cameras (alpha [C, H, W], the
-    ``novel_rig`` order) whose alpha < ``empty_alpha``, per-camera empties, the mean actual offset
-    (m), and with truth [C, H, W, 3] PSNR of renders against it (pooled over the distance's cameras)."""
+    ``novel_rig`` order) whose alpha < ``empty_alpha``, cracked = those with alpha < ``crack_alpha``,
+    per-camera empties and cracks, the mean actual offset (m), and with truth [C, H, W, 3] PSNR of
+    renders against it (pooled over the distance's cameras)."""
     from holoflow.quality import metrics
 
     P = len(alpha) // len(distances)
@@ -217,8 +328,10 @@ def novel_scores(alpha: torch.Tensor, offsets: torch.Tensor, distances: tuple[fl
     for i, d in enumerate(distances):
         sl = slice(i * P, (i + 1) * P)
         empty = (alpha[sl] < empty_alpha).double()
-        r = dict(cameras=P, empty=float(empty.mean()), offset_m=float(offsets[sl].mean()),
-                 per_camera_empty=[round(float(e), 5) for e in empty.flatten(1).mean(1)])
+        crack = (alpha[sl] < crack_alpha).double()
+        r = dict(cameras=P, empty=float(empty.mean()), cracked=float(crack.mean()), offset_m=float(offsets[sl].mean()),
+                 per_camera_empty=[round(float(e), 5) for e in empty.flatten(1).mean(1)],
+                 per_camera_cracked=[round(float(e), 5) for e in crack.flatten(1).mean(1)])
         if truth is not None and renders is not None:
             r["psnr"] = metrics.psnr(renders[sl], truth[sl])
         out[f"{d:g}"] = r
@@ -323,20 +436,29 @@ def score_run(run_dir: Path, run_info: dict, spec: ViewingSpec = ViewingSpec(),
     t["niqe_brisque"] = time.monotonic() - t0
     t0 = time.monotonic()
     depth_file = run_dir / "metric_align" / "depth.exr"
-    free = None
+    free, targets = None, None
     if depth_file.is_file():
         depth = torch.from_numpy(read_exr(depth_file)[0]["Z"])
         free = lambda dirs: free_distance(depth, dirs)  # noqa: E731
-    nvm, offsets = novel_rig(spec.distances, spec.per_distance, spec.seed, free, spec.pitch_deg, spec.wall_margin)
+        targets = edge_targets(depth)
+    nvm, offsets = novel_rig(spec.distances, spec.per_distance, spec.seed, free, spec.pitch_deg, spec.wall_margin,
+                             targets)
     nrgb, nalpha = render_at(model, nvm, K, spec.size, spec.backend)
     t["render_novel"] = time.monotonic() - t0
     t0 = time.monotonic()
     truth = true_novel(run_dir, nvm, K, spec.size)
     t["truth_novel"] = time.monotonic() - t0
-    novel = novel_scores(nalpha, offsets, spec.distances, spec.empty_alpha, nrgb, truth)
+    novel = novel_scores(nalpha, offsets, spec.distances, spec.empty_alpha, nrgb, truth, spec.crack_alpha)
+    t0 = time.monotonic()
+    if spec.size >= 192 and spec.novel_nr and len(pick):
+        for i, (d, r) in enumerate(novel.items()):
+            sl = slice(i * spec.per_distance, (i + 1) * spec.per_distance)
+            r["nr"] = nr_scores(nrgb[sl], sources[pick])
+    t["novel_niqe_brisque"] = time.monotonic() - t0
     scores = dict(base=base, nr=nr, novel=novel, source=src.kind, notes=src.notes, gaussians=len(model),
                   spec={k: list(v) if isinstance(v, tuple) else v for k, v in asdict(spec).items()},
-                  seconds=t, depth_for_novel=depth_file.is_file())
+                  seconds=t, depth_for_novel=depth_file.is_file(),
+                  edge_targets=0 if targets is None else len(targets[0]))
     pictures = dict(source=sources, render=renders, polar=polar, novel=nrgb, novel_alpha=nalpha, truth=truth)
     return scores, pictures
 
@@ -385,6 +507,13 @@ def table(scores: dict, profile: str | None) -> list[str]:
         goal = g.get("empty_0.5") if d == "0.5" else None
         row(f"novel {d} m empty % ({r['cameras']} cams, {r['offset_m']:.2f} m)", 100 * r["empty"], "{:.2f} %",
             None if goal is None else 100 * goal, at_most=True)
+        if "cracked" in r:
+            row(f"novel {d} m alpha < {s.get('crack_alpha', 0.9)} %", 100 * r["cracked"], "{:.2f} %")
+        for key in ("niqe", "brisque"):
+            x = (r.get("nr") or {}).get(key)
+            if x is not None:
+                row(f"novel {d} m {key.upper()} / source ({x['render']:.1f} / {x['source']:.1f})", x["ratio"],
+                    "{:.2f}x")
         if "psnr" in r:
             row(f"novel {d} m PSNR dB vs truth", r["psnr"], "{:.2f}")
     head = [f"viewing size {s['size']} px, {s['fov_deg']} deg horizontal field of view; source: {scores['source']}; "
@@ -394,7 +523,9 @@ def table(scores: dict, profile: str | None) -> list[str]:
             "the poles (sRGB; pooled: the PSNR of their pooled squared error, which easy flat views do not lift); "
             f"zenith/nadir: the cameras within {s['pole_deg']} deg of them. NIQE / BRISQUE (lower is better): means "
             f"over {nr.get('cameras', 0)} of those cameras, render / source. Empty: alpha < {s['empty_alpha']}; "
-            f"novel eyes move horizontally (<= {s['wall_margin']} m short of the run's depth), seed {s['seed']}.",
+            f"novel eyes move horizontally (<= {s['wall_margin']} m short of the run's depth) and look sideways or "
+            f"back at the depth's edges ({scores.get('edge_targets', 0)} found), seed {s['seed']}; their NIQE / "
+            "BRISQUE: against the same source views.",
             "Paper Table II (at 512 px, its own generated panoramas): PSNR 40.19 dB, SSIM 0.984."]
     return head + rows + [f"  note: {n}" for n in scores.get("notes", [])] + foot
 

@@ -19,7 +19,8 @@ from holoflow.report.runinfo import ReportError, RunInfo, collect
 
 def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str:
     """The report page of ``run`` as HTML text; with ``view_size`` > 0 and a final scene, a first
-    section scores it at that viewing size (holoflow.report.viewing_section)."""
+    section scores it at that viewing size (holoflow.report.viewing_section); each truth score that
+    ``holoflow eval run RUN --truth DIR`` left in runs/<id>/eval/ comes first (holoflow.report.truth_section)."""
     from holoflow.report import clouds as cl
     from holoflow.report import figures as fg
     from holoflow.report import page
@@ -46,6 +47,9 @@ def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str
         info = read_json(run.run_dir / "run.json") or {}
         scores, pictures = score_run(run.run_dir, info, ViewingSpec(size=view_size))
         sections.insert(0, section_html(scores, pictures, run.meta.get("profile")))
+    from holoflow.report.truth_section import truth_sections
+
+    sections[:0] = truth_sections(run.run_dir / "eval")
     footer = (f"made by holoflow report at {time.strftime('%Y-%m-%d %H:%M:%S %Z')}; point clouds: {renderer}, "
               f"cut away above the panorama centre, seen from above")
     return page.document(run, sections, run_metrics, footer)

@@ -1,0 +1,170 @@
+"""A finished scene scored against a truth set (holoflow.evaluation.truth_set; docs/truth-sets.md): what a
+viewer sees walking 0 / 0.25 / 0.5 / 1 m off the panorama centre.
+
+The scene (``transfer_opt/scene.ply``) is rendered by holoflow's rasterizer at each truth view's
+``viewmat`` and K, at the view's size, in sRGB (the space Gaussians are trained in, holoflow.recon.views),
+colour clamped to [0, 1]. Per ring (cameras.json ``ring``):
+
+- ``psnr``: PSNR over all the ring's pixels together (pooled squared error, sRGB); ``psnr_mean`` /
+  ``ssim``: means of the per-view values;
+- ``abs_rel`` / ``delta1``: the render's depth (alpha-composited camera z / alpha) against the views'
+  Z over the pixels whose truth is finite and whose alpha >= ``empty_alpha``: mean |z - z*| / z* and
+  the fraction with max(z / z*, z* / z) < 1.25; ``depth_coverage`` = the share of finite-truth pixels
+  that had a rendered depth;
+- ``empty``: fraction of pixels with alpha < ``empty_alpha`` (0.5); ``cracked``: alpha < ``crack_alpha``
+  (0.9).
+
+Pure functions of tensors, plus ``score_truth`` (files in, scores and pictures out).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+EMPTY_ALPHA = 0.5
+CRACK_ALPHA = 0.9
+DELTA = 1.25
+
+
+def per_view_psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """PSNR dB of each image pair [V, H, W, 3] in [0, 1]: [V] float64 (+inf where equal)."""
+    return -10.0 * torch.log10(((pred.double() - target.double()) ** 2).flatten(1).mean(1))
+
+
+def pooled_psnr(pred: torch.Tensor, target: torch.Tensor) -> float:
+    """PSNR dB of the squared error pooled over all pixels of pred / target [V, H, W, 3] in [0, 1]."""
+    mse = float(((pred.double() - target.double()) ** 2).mean())
+    return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
+
+
+def depth_errors(depth: torch.Tensor, alpha: torch.Tensor, truth: torch.Tensor, empty_alpha: float = EMPTY_ALPHA
+                 ) -> dict:
+    """AbsRel and delta < 1.25 of rendered depth [V, H, W] (metres; camera z) against truth [V, H, W]
+    (camera z, +inf / NaN = no truth) over pixels with finite truth > 0 and alpha [V, H, W] >=
+    ``empty_alpha``; ``coverage`` = those pixels / finite-truth pixels. NaN where no pixel qualifies."""
+    t = truth.double()
+    finite = torch.isfinite(t) & (t > 0)
+    m = finite & (alpha >= empty_alpha) & (depth > 0)
+    n = int(m.sum())
+    if n == 0:
+        return dict(abs_rel=math.nan, delta1=math.nan, coverage=0.0, pixels=0)
+    d, g = depth.double()[m], t[m]
+    ratio = torch.maximum(d / g, g / d)
+    return dict(abs_rel=float(((d - g).abs() / g).mean()), delta1=float((ratio < DELTA).double().mean()),
+                coverage=n / max(int(finite.sum()), 1), pixels=n)
+
+
+def ring_scores(rgb: torch.Tensor, alpha: torch.Tensor, depth: torch.Tensor, truth_rgb: torch.Tensor,
+                truth_z: torch.Tensor, empty_alpha: float = EMPTY_ALPHA, crack_alpha: float = CRACK_ALPHA) -> dict:
+    """Scores of one ring (module docstring): rgb / truth_rgb [V, H, W, 3] sRGB, alpha / depth / truth_z
+    [V, H, W]."""
+    from holoflow.quality import metrics
+
+    p = per_view_psnr(rgb, truth_rgb)
+    s = [metrics.ssim(a, b) for a, b in zip(rgb, truth_rgb)]
+    out = dict(views=len(rgb), psnr=pooled_psnr(rgb, truth_rgb), psnr_mean=float(p.mean()), ssim=sum(s) / len(s),
+               empty=float((alpha < empty_alpha).double().mean()), cracked=float((alpha < crack_alpha).double().mean()),
+               per_view_psnr=[round(float(x), 3) for x in p], per_view_ssim=[round(float(x), 4) for x in s],
+               per_view_cracked=[round(float(x), 5) for x in (alpha < crack_alpha).double().flatten(1).mean(1)])
+    out.update(depth_errors(depth, alpha, truth_z, empty_alpha))
+    return out
+
+
+def render_truth_views(model, viewmats: torch.Tensor, K: torch.Tensor, width: int, height: int, backend: str = "cpu"
+                       ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``model`` rendered at viewmats [V, 4, 4] with K [3, 3]: (rgb [V, H, W, 3] sRGB in [0, 1], alpha
+    [V, H, W], depth [V, H, W] expected camera z in metres, 0 where alpha is 0)."""
+    from holoflow.recon.optimize import render_views
+
+    blank = torch.zeros(height, width, 3)
+    rgb, alpha, depth = render_views(model, [dict(image=blank, viewmat=vm, K=K) for vm in viewmats], backend,
+                                     with_depth=True)
+    return rgb, alpha[..., 0], depth[..., 0]
+
+
+def ring_keys(rings: list[float]) -> list[str]:
+    """The distinct rings in ascending order as keys f"{r:g}" ('0', '0.25', ...)."""
+    return [f"{r:g}" for r in sorted(set(rings))]
+
+
+def score_truth(model_file: Path, truth_dir: Path, backend: str = "cpu") -> tuple[dict, dict]:
+    """Score the scene in ``model_file`` (a 3DGS PLY) against the truth set in ``truth_dir``. Returns
+    (scores: {rings: {ring key: ring_scores}, truth, views, gaussians, seconds}, pictures: {ring key:
+    (truth [V, H, W, 3], render [V, H, W, 3]) sRGB})."""
+    import time
+
+    from holoflow.evaluation.truth_set import read_truth_set
+    from holoflow.splat import GaussianModel
+
+    t0 = time.monotonic()
+    ts = read_truth_set(truth_dir)
+    model = GaussianModel.load_ply(model_file)
+    H, W = ts.rgb.shape[1:3]
+    rgb, alpha, depth = render_truth_views(model, ts.viewmats, ts.K, W, H, backend)
+    rings = torch.tensor(ts.rings)
+    scores, pictures = {}, {}
+    for key in ring_keys(ts.rings):
+        m = torch.isclose(rings, torch.tensor(float(key)))
+        scores[key] = ring_scores(rgb[m], alpha[m], depth[m], ts.rgb[m], ts.z[m])
+        pictures[key] = (ts.rgb[m], rgb[m])
+    return dict(rings=scores, truth=str(ts.folder), views=len(ts.names), gaussians=len(model),
+                size=[int(W), int(H)], seconds=time.monotonic() - t0), pictures
+
+
+def _f(x, fmt: str) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else fmt.format(x)
+
+
+def ring_table(scores: dict) -> list[str]:
+    """The ring table as text lines: one row per ring."""
+    head = (f"  {'ring':>6s} {'views':>5s} {'PSNR dB':>8s} {'mean':>7s} {'SSIM':>7s} {'AbsRel':>7s} {'d<1.25':>7s}"
+            f" {'empty %':>8s} {'a<0.9 %':>8s}")
+    rows = [f"truth set {scores['truth']} ({scores['views']} views, {scores['size'][0]}x{scores['size'][1]} px); "
+            f"{scores['gaussians']} Gaussians", head]
+    for key, r in scores["rings"].items():
+        rows.append(f"  {key + ' m':>6s} {r['views']:5d} {_f(r['psnr'], '{:.2f}'):>8s}"
+                    f" {_f(r['psnr_mean'], '{:.2f}'):>7s} {_f(r['ssim'], '{:.4f}'):>7s}"
+                    f" {_f(r['abs_rel'], '{:.4f}'):>7s} {_f(r['delta1'], '{:.4f}'):>7s}"
+                    f" {_f(100 * r['empty'], '{:.2f}'):>8s} {_f(100 * r['cracked'], '{:.2f}'):>8s}")
+    rows.append("PSNR: pooled over the ring's pixels (mean: of the per-view values), sRGB; AbsRel / d<1.25: rendered "
+                f"camera z vs the views' Z (finite truth, alpha >= {EMPTY_ALPHA}); empty: alpha < {EMPTY_ALPHA}; "
+                f"a<0.9: alpha < {CRACK_ALPHA}.")
+    return rows
+
+
+def ring_markdown(scores: dict) -> list[str]:
+    """The ring table as markdown lines (rows = rings)."""
+    lines = ["| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | empty % | alpha < 0.9 % |",
+             "|---|---|---|---|---|---|---|"]
+    for key, r in scores["rings"].items():
+        lines.append(f"| {key} m | {_f(r['psnr'], '{:.2f}')} | {_f(r['ssim'], '{:.4f}')} | "
+                     f"{_f(r['abs_rel'], '{:.4f}')} | {_f(r['delta1'], '{:.4f}')} | {_f(100 * r['empty'], '{:.2f}')} | "
+                     f"{_f(100 * r['cracked'], '{:.2f}')} |")
+    return lines
+
+
+def ring_strip(truth: torch.Tensor, *renders: torch.Tensor, side: int = 256, gap: int = 4) -> np.ndarray:
+    """One picture of a ring: its views [V, H, W, 3] sRGB side by side, each fitted into ``side`` px, truth
+    above the renders (one row each): uint8 [(1 + R) side + R gap, V side + (V - 1) gap, 3]."""
+    from holoflow.report.pictures import mosaic
+
+    def u8(x):
+        return (x.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8)
+
+    tiles = [t for images in (truth, *renders) for t in u8(images)]
+    return mosaic(tiles, len(truth), side, gap=gap)
+
+
+def write_pictures(pictures: dict, folder: Path, prefix: str) -> dict[str, Path]:
+    """One PNG per ring (``ring_strip``) as folder/{prefix}-ring-{key}.png: {ring key: path}."""
+    from holoflow.io.image import write_png
+
+    folder.mkdir(parents=True, exist_ok=True)
+    out = {}
+    for key, (truth, render) in pictures.items():
+        out[key] = folder / f"{prefix}-ring-{key}.png"
+        write_png(out[key], ring_strip(truth, render))
+    return out
