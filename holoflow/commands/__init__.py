@@ -24,7 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "params": ("holoflow.commands.params", "each stage's params (type, default, range); --markdown"),
     "models": ("holoflow.commands.models", "list|random ...: the real engines' weights"),
     "view": ("holoflow.commands.view", "[RUN | STAGE | FILE.ply]: look around the scene in the browser (viser)"),
-    "eval": ("holoflow.commands.evaluate", "accuracy against procedural ground truth"),
+    "eval": ("holoflow.commands.evaluate", "score a run (against a truth set or its source) or procedural scenes"),
     "report": ("holoflow.report", "a run's report"),
     "bench": ("holoflow.bench", "NAME [ARGS]: run holoflow.bench.NAME (e.g. cache)"),
 }
