@@ -17,8 +17,8 @@ def main() -> int:
     import torch
 
     from holoflow.geometry.camera import intrinsics_from_fov
-    from holoflow.geometry.config import PanoSetParams
     from holoflow.geometry.camera_files import cameras_json, write_cameras, write_transforms
+    from holoflow.geometry.config import PanoSetParams
     from holoflow.geometry.rigs import base_rig, rig_coverage
     from holoflow.geometry.sampling import equirect_to_pinhole_batches
     from holoflow.io.exr import read_rgb, write_rgb

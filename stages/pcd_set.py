@@ -20,8 +20,14 @@ def main() -> int:
     import kornia
     import torch
 
+    from holoflow.geometry.camera_files import (
+        cameras_json,
+        cameras_tensors,
+        read_cameras,
+        write_cameras,
+        write_transforms,
+    )
     from holoflow.geometry.config import PcdSetParams
-    from holoflow.geometry.camera_files import cameras_json, cameras_tensors, read_cameras, write_cameras, write_transforms
     from holoflow.geometry.pcdset import pcd_set
     from holoflow.geometry.rigs import SUPPLEMENTARY
     from holoflow.io.exr import write_rgb

@@ -13,12 +13,12 @@ def main() -> int:
 
     job = Job.from_argv()
     job.torch_threads(1)          # small tensors here; the numba kernels use job.cpus threads
-    from holoflow.io.ply import read_points
     from holoflow.io.exr import read_rgb
+    from holoflow.io.ply import read_points
     from holoflow.recon.colour_fit import fit_colours, polar_weights, viewing_views
     from holoflow.recon.config import TransferOptParams
-    from holoflow.recon.preview import write_previews
     from holoflow.recon.optimize import cloud_footprint, save_result, transfer_optimize
+    from holoflow.recon.preview import write_previews
     from holoflow.recon.views import load_view_set
 
     cfg = job.config(TransferOptParams)

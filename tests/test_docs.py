@@ -8,8 +8,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_stage_param_tables_are_generated_from_the_param_classes():
     """Every stage's table in docs/stages.md is what `holoflow params --update-docs` writes now."""
-    from holoflow.flow import pipeline
     from holoflow.commands.params import update_doc
+    from holoflow.flow import pipeline
 
     pipe = pipeline.load(ROOT / "pipeline.yaml")
     text = (ROOT / "docs" / "stages.md").read_text()

@@ -130,8 +130,8 @@ def measure(case: Case, profile: str, args) -> tuple[dict, dict, dict]:
     """Run (or serve from the store) one case in one profile and score it at the viewing size:
     (row of figures, scores, pictures)."""
     from holoflow.evaluation.runs import run_pipeline
-    from holoflow.flow.store import Store
     from holoflow.evaluation.viewing_size import ViewingSpec, score_run
+    from holoflow.flow.store import Store
 
     t0 = time.monotonic()
     load = os.getloadavg()[0]
@@ -286,9 +286,9 @@ def main(args) -> int:
     """Run the profile comparison for the parsed ``holoflow bench accuracy`` arguments (module
     docstring); returns the exit code."""
     from holoflow.evaluation.machine import machine
+    from holoflow.evaluation.truth_scores import ring_strip
     from holoflow.flow import pipeline
     from holoflow.report.pictures import encode
-    from holoflow.evaluation.truth_scores import ring_strip
     from holoflow.report.viewing_section import base_picture, novel_picture
 
     pipe = pipeline.load(ROOT / "pipeline.yaml")

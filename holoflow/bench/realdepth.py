@@ -43,8 +43,8 @@ ENGINES = {"prior": ["--set", "tangent_depth.engine=prior", "--set", "metric_ali
 def run_pipeline(store: Path, prompt: str, extra: list[str]) -> tuple[np.ndarray, dict, float]:
     """``holoflow run PROMPT EXTRA --until metric_align`` in ``store``; (depth [H, W], metric_align.json,
     seconds the two depth steps took in that run: the sum of their records' ``wall_s``, 0 if cached)."""
-    from holoflow.io.exr import read_exr
     from holoflow.flow.store import Store
+    from holoflow.io.exr import read_exr
 
     env = {**os.environ, "HOLOFLOW_STORE": str(store)}
     root = Path(__file__).resolve().parents[2]
@@ -66,8 +66,8 @@ def detail_input(store: Path, width: int) -> np.ndarray:
     """The latest run's detail panorama (linear RGB [H, W, 3]) resized to ``width``: what the depth
     engines receive."""
     from holoflow.depth.inputs import read_pano
-    from holoflow.geometry.sampling import resize_pano
     from holoflow.flow.store import Store
+    from holoflow.geometry.sampling import resize_pano
 
     st = Store(store)
     return resize_pano(read_pano(st.run_dir(st.run_ids()[-1]) / "detail" / "pano.exr"), width)
@@ -85,8 +85,8 @@ def read_truth(path: Path) -> tuple[np.ndarray, str]:
 
 def score(depth: np.ndarray, truth: np.ndarray, scale: str) -> dict:
     """AbsRel / RMSE / delta1 (holoflow.depth.accuracy) of a prediction against a truth of ``scale``."""
-    from holoflow.depth.panorama import resize_radial
     from holoflow.depth.accuracy import depth_metrics
+    from holoflow.depth.panorama import resize_radial
 
     t = resize_radial(np.where(np.isnan(truth), 0.0, truth), *depth.shape)  # NaN -> 0: left out
     fit = 1.0

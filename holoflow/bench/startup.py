@@ -47,8 +47,8 @@ def main(argv: list[str]) -> int:
 def step_startup(pipe_path: Path, rounds: int) -> list[tuple[str, list[float], list[float]]]:
     """Per stage: (name, cold seconds per round, warm seconds per round) of its import probe."""
     from holoflow.flow.cachekey import CodeHasher
-    from holoflow.flow.executors.task import step_env
     from holoflow.flow.executors.step import ExecStep
+    from holoflow.flow.executors.task import step_env
     from holoflow.flow.executors.warm import Launcher, preload
     from holoflow.flow.pipeline import load as load_pipeline
 

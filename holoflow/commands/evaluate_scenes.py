@@ -38,7 +38,6 @@ from holoflow.evaluation.runs import run_pipeline
 from holoflow.evaluation.scores import evaluate_run, strip_image
 from holoflow.evaluation.tables import PAPER_TABLE2, PAPER_TABLE3, VARIANTS, _fmt, markdown, mean_tree, picture_name
 
-
 PROMPTS = ["a cozy wooden cabin at night", "a sunny beach with palm trees",
            "a modern living room with a sofa and a lamp", "a stone courtyard with a fountain"]
 
@@ -83,8 +82,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"holoflow eval: unknown variant(s) {unknown}; choose from {list(VARIANTS)}", file=sys.stderr)
         return 2
 
-    from holoflow.quality import metrics
     from holoflow.io.image import write_png
+    from holoflow.quality import metrics
 
     results: dict = {}
     cache: dict = {}

@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 
-
 class InspectError(ValueError):
     pass
 

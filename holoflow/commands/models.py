@@ -51,6 +51,6 @@ def main(argv: list[str]) -> int:
         print(f"    {'at ' + n.detail if n.present else 'get: ' + n.detail}")
     missing = sum(not n.present for n in found)
     print(f"holoflow models: {len(found) - missing} of {len(found)} present"
-          + (f"; without weights: `holoflow models random DIR` then `holoflow run --models DIR` gives the "
-             f"real compute cost with noise images" if missing else ""))
+          + ("; without weights: `holoflow models random DIR` then `holoflow run --models DIR` gives the "
+             "real compute cost with noise images" if missing else ""))
     return 0

@@ -30,7 +30,6 @@ import numpy as np
 
 from holoflow.stage import Progress
 
-
 #: simulated relative engine; sizes are fractions of the face side so any face size behaves alike
 SIM_RELATIVE = {
     "edge_blur": 0.01,        # Gaussian sigma of the edge mixing, fraction of the face side

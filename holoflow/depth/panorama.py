@@ -8,14 +8,15 @@ Arrays: panoramas are numpy [H, W, 3] linear RGB; radial depth [H, W] metres (+i
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
 
-from holoflow.depth.face_alignment import Alignment, align_faces
+from holoflow.depth.accuracy import depth_metrics
 from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 from holoflow.depth.engines import resolve_engine
+from holoflow.depth.face_alignment import Alignment, align_faces
 from holoflow.depth.faces import face_rays, find_overlaps
 from holoflow.depth.metric_alignment import disparity_to_depth, robust_affine_fit, sky_disparity, sky_mixed_edges
-from holoflow.depth.accuracy import depth_metrics
 from holoflow.stage import Progress
 
 

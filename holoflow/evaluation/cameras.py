@@ -4,6 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import torch
+
+    from holoflow.scene import Scene
 
 
 MAX_OFFSET_M = 1.0      # novel cameras: at most this far from the centre (metres)
@@ -32,7 +38,6 @@ def hidden_from_centre(scene, origins, dirs) -> "torch.Tensor":
 def hidden_masks(scene, viewmats, K, width: int, height: int) -> "torch.Tensor":
     """Per pixel of each camera, whether its surface is hidden from the centre: [C, H, W] bool
     (pixel-centre rays; see ``hidden_from_centre``)."""
-    import torch
 
     from holoflow.geometry.camera import pinhole_rays
 

@@ -4,8 +4,12 @@ engines made a run's depth. The project is the checkout holding the holoflow pac
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from holoflow.flow.code_closure import HOLOFLOW_ROOT
+
+if TYPE_CHECKING:
+    from holoflow.flow.store import Store
 
 
 DEPTH_STAGES = ("base_pano", "tangent_depth", "metric_align")
@@ -51,8 +55,8 @@ def run_pipeline(prompt: str, profile: str, sets: list[str], store: Path | None,
     import io
 
     from holoflow.flow import pipeline
-    from holoflow.flow.progress import make_display
     from holoflow.flow.context import BatchItem, Context, Options
+    from holoflow.flow.progress import make_display
     from holoflow.flow.scheduler import run
     from holoflow.networks.manifest import prepare
 

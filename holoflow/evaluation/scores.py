@@ -3,10 +3,22 @@ each camera set, NIQE / BRISQUE at the supplementary cameras (holoflow.quality),
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from holoflow.evaluation.cameras import (Views, base_views, hidden_masks, novel_cameras, square_K,
-                                         supp_cameras, true_views)
+from holoflow.evaluation.cameras import (
+    Views,
+    base_views,
+    hidden_masks,
+    novel_cameras,
+    square_K,
+    supp_cameras,
+    true_views,
+)
 from holoflow.evaluation.runs import depth_engines
+
+if TYPE_CHECKING:
+    import numpy as np
+    import torch
 
 
 def score(model, viewmats, K, targets, backend: str, hidden=None) -> tuple[dict, "torch.Tensor"]:
@@ -79,7 +91,6 @@ def evaluate_run(run_dir: Path, novel: int, offset: float, supp: int, seed: int,
     """Scores of G0 and G1 of one pipeline run (folder runs/<id>/ with one folder per stage):
     ``novel`` random cameras, a seeded subset of ``supp`` supplementary cameras (0 = all), NIQE /
     BRISQUE at those supplementary cameras rendered at ``nr_size`` px (0 = skip)."""
-    import torch
 
     scene, base = base_views(run_dir)
     K, h, w = base.K, int(base.targets.shape[1]), int(base.targets.shape[2])

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from .pipeline import Pipeline, PipelineError
 from .context import BatchItem, Context, Options
+from .pipeline import Pipeline, PipelineError
 from .store import Store
 
 

@@ -342,8 +342,8 @@ def _resources(path: Path, stage: str, raw: Any, base: Resources, origin: str) -
               else isinstance(value, (int, float)) and not isinstance(value, bool) and value == value)
         low = 1 if key == "cpus" else 0
         if not ok or value < low or value == float("inf"):
-            kind = "an integer" if _RESOURCE_KEYS[key] is int else "a number"
-            raise _err(path, stage, f"{origin} sets {key}={value!r}", f"give {key} {kind} >= {low}")
+            want = "an integer" if _RESOURCE_KEYS[key] is int else "a number"
+            raise _err(path, stage, f"{origin} sets {key}={value!r}", f"give {key} {want} >= {low}")
         over[key] = _RESOURCE_KEYS[key](value)
     return base.replace(**over)
 

@@ -70,8 +70,8 @@ def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     with a 6656 px photo costs its sha256, not a decode and a 265 MB EXR."""
     from holoflow.io.exr import write_rgb
     from holoflow.io.image import ImageImportError, read_panorama_image
-
     from holoflow.io.validate import InputRefused
+
     from .store import sha256_file
 
     sha, name = sha256_file(src), src.name
@@ -98,6 +98,7 @@ def _import_exr(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     passes, else written repaired (the notes go to the run record and the step's line), or refused."""
     from holoflow.io.exr import write_exr
     from holoflow.io.validate import InputRefused, check_exr
+
     from .store import sha256_file
 
     s = ctx.pipe.stages[stage]

@@ -31,12 +31,17 @@ from dataclasses import dataclass, field
 
 import torch
 
-from holoflow.geometry.area import (called_for, equirect_to_area_points, polar_caps, view_pixel_rad, view_width)
+from holoflow.geometry.area import called_for, equirect_to_area_points, polar_caps, view_pixel_rad, view_width
 from holoflow.geometry.config import PointCloudParams
 from holoflow.geometry.edges import snap_depth_edges
 from holoflow.geometry.layers import background_layer
-from holoflow.geometry.pointcloud import (depth_gradient_mask, equirect_to_points, far_shell_radius, resample_rgbd,
-                                          sky_to_shell)
+from holoflow.geometry.pointcloud import (
+    depth_gradient_mask,
+    equirect_to_points,
+    far_shell_radius,
+    resample_rgbd,
+    sky_to_shell,
+)
 from holoflow.geometry.sampling import resize_equirect
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.geometry.surfaces import smooth_depth, surface_normals

@@ -39,7 +39,6 @@ import numpy as np
 import torch
 from numba import njit
 
-
 MAX_DEPTH_RATIO = 1.5     # extrapolated layer depth stays within this factor of the edge's own depth
 
 

@@ -29,8 +29,12 @@ import torch
 import torch.nn.functional as F
 
 from holoflow.geometry.camera import project_points
-from holoflow.geometry.sphere import (direction_to_lonlat, equirect_pixel_to_lonlat,
-                                      lonlat_to_direction, lonlat_to_equirect_pixel)
+from holoflow.geometry.sphere import (
+    direction_to_lonlat,
+    equirect_pixel_to_lonlat,
+    lonlat_to_direction,
+    lonlat_to_equirect_pixel,
+)
 
 _PAD = 2  # spherical padding, pixels on every side; enough for bilinear and nearest taps
 

@@ -2,7 +2,12 @@
 8-bit conversion, luminance. numpy only at import (the torch pair imports kornia when called)."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    import torch
 
 
 def linear_to_srgb(x: np.ndarray, clip: bool = False) -> np.ndarray:

@@ -126,8 +126,12 @@ def load_sd(kind: str, base, controlnet, device, scheduler: str = "unipc"):
     "controlnet_img2img"}. No safety checker / feature extractor is loaded (none is needed to
     denoise, and their image processor would pull in torchvision)."""
     import torch
-    from diffusers import (ControlNetModel, StableDiffusionControlNetImg2ImgPipeline,
-                           StableDiffusionControlNetPipeline, StableDiffusionPipeline)
+    from diffusers import (
+        ControlNetModel,
+        StableDiffusionControlNetImg2ImgPipeline,
+        StableDiffusionControlNetPipeline,
+        StableDiffusionPipeline,
+    )
     from diffusers.utils import logging as dlog
 
     dlog.set_verbosity_error()

@@ -11,8 +11,15 @@ from __future__ import annotations
 import numpy as np
 
 from holoflow.imageops.color import srgb_to_linear
-from holoflow.networks.circular import (NEGATIVE_PROMPT, decode_periodic, initial_noise, latent_grid, load_sd,
-                                       overlap_columns, step_callback)
+from holoflow.networks.circular import (
+    NEGATIVE_PROMPT,
+    decode_periodic,
+    initial_noise,
+    latent_grid,
+    load_sd,
+    overlap_columns,
+    step_callback,
+)
 from holoflow.networks.common import resize_wrap, to_hwc, torch_device
 from holoflow.networks.weights import resolve
 from holoflow.stage import Progress

@@ -174,8 +174,8 @@ def lama_engine(images: np.ndarray, masks: np.ndarray, depths: np.ndarray | None
     """inp_set's ``lama`` engine (holoflow.networks.lama, weights: cfg.model); LaMa takes linear RGB."""
     import torch
 
-    from holoflow.networks import lama
     from holoflow.imageops.color import linear_to_srgb_torch, srgb_to_linear_torch
+    from holoflow.networks import lama
 
     linear = srgb_to_linear_torch(torch.from_numpy(images)).numpy()
     filled = lama.inpaint(linear, masks.astype(np.float32), cfg.model, device, progress)

@@ -40,8 +40,8 @@ def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str
         sections.append(page.stage_section(s, figs, notes, metrics))
     scene = run.run_dir / "transfer_opt" / "scene.ply"
     if view_size > 0 and scene.is_file():
-        from holoflow.flow.store import read_json
         from holoflow.evaluation.viewing_size import ViewingSpec, score_run
+        from holoflow.flow.store import read_json
         from holoflow.report.viewing_section import section_html
 
         info = read_json(run.run_dir / "run.json") or {}

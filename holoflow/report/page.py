@@ -11,8 +11,8 @@ import html
 import json
 from typing import Any
 
-from holoflow.report.runinfo import RunInfo, StageInfo
 from holoflow.report.figures import Figure
+from holoflow.report.runinfo import RunInfo, StageInfo
 
 CSS = """
 body{font:14px/1.45 system-ui,-apple-system,'Segoe UI',sans-serif;margin:0 auto;max-width:1180px;padding:18px;

@@ -15,8 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from holoflow.scene import vocab
-from holoflow.scene.model import (Box, Cylinder, Effects, Ellipsoid, Ground, Material, PointLight, Room, Scene,
-                                  Sky, Vec3)
+from holoflow.scene.model import Box, Cylinder, Effects, Ellipsoid, Ground, Material, PointLight, Room, Scene, Sky, Vec3
 
 EYE_HEIGHT = 1.6          # metres above the floor / ground
 CAMERA_CLEARANCE = 0.5    # metres: nothing is placed closer to the camera than this

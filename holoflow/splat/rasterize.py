@@ -179,7 +179,8 @@ def compile_ahead() -> None:
     are left to their first use. holoflow/flow/executors/ahead.py."""
     import numpy as np
 
-    from holoflow.splat import composite_cpu as cpu, project_cpu as cp
+    from holoflow.splat import composite_cpu as cpu
+    from holoflow.splat import project_cpu as cp
     from holoflow.splat.synthetic import intrinsics, surface_scene
 
     f4, f8, i8 = (lambda *shape, dt=dt: np.zeros(shape, dt) for dt in (np.float32, np.float64, np.int64))

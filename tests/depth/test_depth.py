@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from holoflow.depth import panorama as pd
-from holoflow.depth.face_alignment import align_faces
+from holoflow.depth.accuracy import depth_metrics
 from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 from holoflow.depth.engines import layout_radial_depth, simulated_relative
+from holoflow.depth.face_alignment import align_faces
 from holoflow.depth.faces import face_rays, find_overlaps
 from holoflow.depth.metric_alignment import disparity_to_depth, robust_affine_fit, sky_mixed_edges
-from holoflow.depth.accuracy import depth_metrics
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -317,8 +317,8 @@ def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room
     """The real engines encode sRGB themselves (docs/conventions.md: EXR colour is linear light), so the depth code
     must hand them the *linear* faces: an encode here too would be a double encode. Their progress
     callbacks are called (done, total, what), as holoflow.stage.Job.progress takes them."""
-    from holoflow.networks import depth_anything, zoedepth
     from holoflow.imageops.color import linear_to_srgb
+    from holoflow.networks import depth_anything, zoedepth
 
     rgb, r = room_pano
     faces = pd.icosahedron_faces(16, 0.3)

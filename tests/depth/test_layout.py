@@ -6,8 +6,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holoflow.depth.layout import (LayoutConfig, boundary_dp, classify_scene, estimate_layout_depth, lower_boundary,
-                                   upper_boundary)
+from holoflow.depth.layout import (
+    LayoutConfig,
+    boundary_dp,
+    classify_scene,
+    estimate_layout_depth,
+    lower_boundary,
+    upper_boundary,
+)
 from holoflow.depth.vanishing import rotate_equirect, rotation_to_upright, segment_normals, vertical_direction
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data"

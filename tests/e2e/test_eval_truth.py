@@ -43,9 +43,9 @@ def test_eval_run_with_truth_scores_every_ring(two_runs, truth_dir, tmp_path, ca
     assert json.loads((tmp_path / "o" / "truth-cabin.json").read_text())["rings"] == r["rings"]
     assert evaluate.main(["run", "latest", "--store", str(store), "--truth", str(tmp_path)]) == 2
 
+    from holoflow.flow.store import Store
     from holoflow.report import build
     from holoflow.report.runinfo import collect
-    from holoflow.flow.store import Store
 
     html = build(collect(Store(store), "latest"), render_clouds=False, view_size=0)
     assert "walking: against the truth set cabin" in html

@@ -82,10 +82,9 @@ def test_square_K_keeps_the_field_of_view():
 
 
 def test_nr_scores_are_finite_means_over_the_cameras_and_a_missing_model_is_reported(monkeypatch):
-    from tests.recon import synth
-
-    from holoflow.quality import metrics, nriqa
     from holoflow.geometry.camera import intrinsics_from_fov
+    from holoflow.quality import metrics, nriqa
+    from tests.recon import synth
 
     model, vm = synth.truth_model(), synth.supplementary_cameras(synth.base_cameras())[:2]
     K = intrinsics_from_fov(90.0, 24, 24, dtype=torch.float32)                # a 24 px set, rendered at 192

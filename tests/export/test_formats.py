@@ -17,8 +17,16 @@ import torch
 from holoflow.export.config import ExportParams
 from holoflow.export.gltf import gaussians_glb_bytes, mesh_glb_bytes
 from holoflow.export.mesh import rgbd_mesh
-from holoflow.export.splats import (SH_C0, SH_FLIP, SPLAT_DTYPE, Y_UP, activate, compressed_ply_bytes,
-                                    splat_bytes, spz_bytes)
+from holoflow.export.splats import (
+    SH_C0,
+    SH_FLIP,
+    SPLAT_DTYPE,
+    Y_UP,
+    activate,
+    compressed_ply_bytes,
+    splat_bytes,
+    spz_bytes,
+)
 from holoflow.flow.params import ParamError
 from holoflow.splat.project import eval_sh, quat_to_rotmat
 

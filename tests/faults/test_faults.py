@@ -18,8 +18,17 @@ from pathlib import Path
 
 import pytest
 
-from .faultkit import TAIL, final_bytes, holoflow, one_clear_line, popen, run_json, verify_clean, \
-    wait_for_step, without_tail
+from .faultkit import (
+    TAIL,
+    final_bytes,
+    holoflow,
+    one_clear_line,
+    popen,
+    run_json,
+    verify_clean,
+    wait_for_step,
+    without_tail,
+)
 
 pytestmark = pytest.mark.timeout(600)
 

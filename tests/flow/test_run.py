@@ -3,8 +3,6 @@ import json
 import os
 import stat
 
-import pytest
-
 
 def test_run_then_cached_then_status(project, capsys):
     s = project.run_json("a cabin", capsys=capsys)

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from holoflow.commands import main
 from holoflow.flow import pipeline
 from holoflow.flow.cachekey import cache_key, components
-from holoflow.commands import main
 from holoflow.flow.store import Store
 
 # A stage that proves (or refutes) that it ran at the same time as its peers: it registers in a

@@ -7,8 +7,14 @@ import numpy as np
 import pytest
 import torch
 
-from holoflow.geometry.area import (area_counts, area_sample, equirect_to_area_points, footprint_gaussians,
-                                    polar_caps, view_pixel_rad)
+from holoflow.geometry.area import (
+    area_counts,
+    area_sample,
+    equirect_to_area_points,
+    footprint_gaussians,
+    polar_caps,
+    view_pixel_rad,
+)
 from holoflow.geometry.camera import intrinsics_from_fov
 from holoflow.geometry.config import PointCloudParams
 from holoflow.geometry.pointcloud import equirect_to_points

@@ -4,8 +4,16 @@ import json
 import torch
 
 from holoflow.geometry.camera import camera_centers, intrinsics_from_fov, look_at, rotmat_to_quat
-from holoflow.geometry.camera_files import (cameras_json, cameras_tensors, read_cameras, read_colmap, read_transforms,
-                                      write_cameras, write_colmap, write_transforms)
+from holoflow.geometry.camera_files import (
+    cameras_json,
+    cameras_tensors,
+    read_cameras,
+    read_colmap,
+    read_transforms,
+    write_cameras,
+    write_colmap,
+    write_transforms,
+)
 from holoflow.geometry.rigs import base_rig, supplementary_rig
 
 

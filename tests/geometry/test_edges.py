@@ -13,7 +13,7 @@ from holoflow.geometry.layers import background_layer
 from holoflow.geometry.pointcloud import depth_gradient_mask, equirect_to_points
 from holoflow.recon.config import TransferOptParams
 
-from .test_layers import room_with_box     # the analytic box room
+from .test_layers import room_with_box  # the analytic box room
 
 
 def test_a_ramp_becomes_a_step_and_its_layer_lies_on_the_far_side():

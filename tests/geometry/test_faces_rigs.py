@@ -5,8 +5,14 @@ import pytest
 import torch
 
 from holoflow.geometry.camera import camera_centers, fov_from_focal, intrinsics_from_fov, pinhole_rays, project_points
-from holoflow.geometry.icosahedron import (equirect_face_index, face_of_direction, frustum_weight, icosahedron,
-                                           tangent_faces, triangle_mask)
+from holoflow.geometry.icosahedron import (
+    equirect_face_index,
+    face_of_direction,
+    frustum_weight,
+    icosahedron,
+    tangent_faces,
+    triangle_mask,
+)
 from holoflow.geometry.rigs import base_directions, base_rig, rig_coverage, supplementary_rig
 from holoflow.geometry.sphere import equirect_directions
 

@@ -7,7 +7,12 @@ import torch
 
 from holoflow.geometry.camera import intrinsics_from_fov, look_at, pinhole_rays
 from holoflow.geometry.layers import background_layer
-from holoflow.geometry.pointcloud import depth_gradient_mask, equirect_to_points, footprint_radius, project_points_zbuffer
+from holoflow.geometry.pointcloud import (
+    depth_gradient_mask,
+    equirect_to_points,
+    footprint_radius,
+    project_points_zbuffer,
+)
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.recon.config import TransferOptParams
 

@@ -6,8 +6,7 @@ import torch
 import torch.nn.functional as F
 
 from holoflow.geometry.camera import intrinsics_from_fov, look_at, pinhole_rays
-from holoflow.geometry.pointcloud import (depth_gradient, depth_gradient_mask, equirect_to_points,
-                                          project_points_zbuffer)
+from holoflow.geometry.pointcloud import depth_gradient, depth_gradient_mask, equirect_to_points, project_points_zbuffer
 from holoflow.geometry.sphere import equirect_directions
 
 ROOM = 2.0  # box room [-2, 2]^3

@@ -5,9 +5,16 @@ import pytest
 import torch
 
 from holoflow.geometry.camera import intrinsics_from_fov, look_at, pinhole_rays
-from holoflow.geometry.sampling import (equirect_to_pinhole, equirect_to_pinhole_batches, equirect_window,
-                                       pad_equirect, pinhole_to_equirect, resize_equirect, ring_prefilter,
-                                       sample_equirect)
+from holoflow.geometry.sampling import (
+    equirect_to_pinhole,
+    equirect_to_pinhole_batches,
+    equirect_window,
+    pad_equirect,
+    pinhole_to_equirect,
+    resize_equirect,
+    ring_prefilter,
+    sample_equirect,
+)
 from holoflow.geometry.sphere import direction_to_lonlat, equirect_directions, lonlat_to_equirect_pixel
 
 
@@ -82,8 +89,9 @@ def test_e2p_p2e_round_trip(dtype, device):
 
 def _p2e_dense(images, K, viewmat, height, width, weights):
     """Reference p2e: every equirect pixel projected into every view (no footprint)."""
-    from holoflow.geometry.camera import project_points
     import torch.nn.functional as F
+
+    from holoflow.geometry.camera import project_points
 
     B, C, h, w = images.shape
     dirs = equirect_directions(height, width, device=images.device, dtype=images.dtype).reshape(-1, 3)

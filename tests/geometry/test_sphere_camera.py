@@ -3,12 +3,27 @@ import math
 
 import pytest
 import torch
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from holoflow.geometry.camera import (camera_centers, intrinsics, intrinsics_from_fov, invert_viewmat, look_at,
-                                      pinhole_rays, project_points, quat_to_rotmat, rotmat_to_quat)
-from holoflow.geometry.sphere import (direction_to_lonlat, equirect_directions, equirect_pixel_to_lonlat,
-                                      lonlat_to_direction, lonlat_to_equirect_pixel)
+from holoflow.geometry.camera import (
+    camera_centers,
+    intrinsics,
+    intrinsics_from_fov,
+    invert_viewmat,
+    look_at,
+    pinhole_rays,
+    project_points,
+    quat_to_rotmat,
+    rotmat_to_quat,
+)
+from holoflow.geometry.sphere import (
+    direction_to_lonlat,
+    equirect_directions,
+    equirect_pixel_to_lonlat,
+    lonlat_to_direction,
+    lonlat_to_equirect_pixel,
+)
 
 TOL = {torch.float32: 2e-6, torch.float64: 1e-12}
 PI = math.pi

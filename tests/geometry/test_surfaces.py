@@ -5,7 +5,6 @@ wall with a network's per-pixel depth noise stays opaque, and at a box before a 
 spans the gap between the two."""
 import math
 
-import numpy as np
 import pytest
 import torch
 
@@ -19,7 +18,7 @@ from holoflow.recon.config import TransferOptParams
 from holoflow.recon.optimize import init_model
 from holoflow.splat import render
 
-from .test_layers import BOX, room_with_box     # the analytic box room
+from .test_layers import BOX, room_with_box  # the analytic box room
 
 HALF = torch.tensor([2.0, 1.5, 2.5], dtype=torch.float64)     # a box room's half sizes (m)
 

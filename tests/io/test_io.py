@@ -2,8 +2,7 @@ import numpy as np
 import pytest
 
 from holoflow.io.exr import ExrError, read_exr, read_radial_depth, read_rgb, write_exr, write_rgb
-from holoflow.io.ply import (PlyError, gaussian_fields, read_gaussians, read_points, write_gaussians,
-                             write_points)
+from holoflow.io.ply import PlyError, gaussian_fields, read_gaussians, read_points, write_gaussians, write_points
 
 
 def test_exr_round_trip_bit_exact_with_nan_inf_and_attrs(tmp_path):

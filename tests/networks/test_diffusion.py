@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 import torch
 
-from .engine_checks import seam_is_typical
 from holoflow.networks.circular import blend_overlap, decode_periodic, extend_periodic, overlap_columns
+
+from .engine_checks import seam_is_typical
 
 pytestmark = pytest.mark.models
 pytest.importorskip("diffusers")

@@ -3,9 +3,10 @@ import numpy as np
 import pytest
 import torch
 
-from .engine_checks import seam_is_typical
 from holoflow.networks.realesrgan import rrdbnet_class, rrdbnet_from_state_dict, upscale, upscale_srgb
 from holoflow.networks.weights import MissingWeights
+
+from .engine_checks import seam_is_typical
 
 pytestmark = pytest.mark.models
 pytest.importorskip("safetensors")

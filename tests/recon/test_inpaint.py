@@ -3,7 +3,14 @@ import numpy as np
 import pytest
 
 from holoflow.recon.config import InpSetParams
-from holoflow.recon.inpaint import DIRECTIONS, OPENCV_METHODS, background_fill, first_observed, inpaint_views, missing_mask
+from holoflow.recon.inpaint import (
+    DIRECTIONS,
+    OPENCV_METHODS,
+    background_fill,
+    first_observed,
+    inpaint_views,
+    missing_mask,
+)
 
 
 def _scene(n=3, h=32, w=32):

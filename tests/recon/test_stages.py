@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 import torch
 
-from . import synth
-from holoflow.quality import metrics
 from holoflow.io.exr import read_exr
 from holoflow.io.ply import read_points
+from holoflow.quality import metrics
 from holoflow.recon.optimize import panorama_extent, render_views
+
+from . import synth
 
 ROOT = Path(__file__).resolve().parents[2]
 SIZE = 24

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from holoflow.flow.store import Store
 from holoflow.report import chromium, clouds, main
 from holoflow.report.runinfo import ReportError, collect
-from holoflow.flow.store import Store
 
 ROOT = Path(__file__).resolve().parents[2]
 PIPELINE = ROOT / "pipeline.yaml"

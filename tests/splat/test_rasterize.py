@@ -294,8 +294,8 @@ def test_fast_matches_reference_when_most_gaussians_are_out_of_view(dtype):
 def test_fast_projection_draws_what_the_reference_tests_draw(dtype):
     # project_cpu skips the covariance of Gaussians that a cheap bound puts off the image; large ones
     # centred outside the view whose reach enters it must still be drawn, in every camera.
-    from holoflow.splat.project_cpu import project_cpu
     from holoflow.splat.project import pixel_extent, project_gaussians
+    from holoflow.splat.project_cpu import project_cpu
 
     p = {k: v.detach() for k, v in random_scene(600, 11, dtype).items()}
     g = torch.Generator().manual_seed(11)

@@ -34,9 +34,8 @@ def make_executor(kind: str, jobs: int = 1, address: str | None = None, device: 
 
         return LocalExecutor(jobs, device=device, on_line=on_line, warm=warm)
     if kind == "ray":
-        from .ray_executor import RayExecutor
-
         from .ray_connect import CONNECT_TIMEOUT_S
+        from .ray_executor import RayExecutor
 
         return RayExecutor(address=address, jobs=jobs, device=device,
                            connect_timeout=CONNECT_TIMEOUT_S if connect_timeout is None else connect_timeout)

@@ -16,8 +16,8 @@ from typing import Any
 
 from ..code_closure import HOLOFLOW_ROOT
 from . import ahead as ahead_mod
-from .task import StepTask, gpu_ids, host_memory_gb, step_env
 from .step import run_step
+from .task import StepTask, gpu_ids, host_memory_gb, step_env
 
 
 class LocalExecutor:

@@ -21,10 +21,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 from holoflow import __version__
+
 from ..store import Store, remove_tree
 from .failure import exit_reason, store_problem
-from .task import StepTask, step_env
 from .step_env import PINNED_ENV, cpu_facts
+from .task import StepTask, step_env
 
 LOG_TAIL = 15
 

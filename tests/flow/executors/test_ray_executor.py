@@ -10,9 +10,9 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from holoflow.commands import main                                    # noqa: E402
-from holoflow.flow.executors import StepTask                          # noqa: E402
-from holoflow.flow.store import Store                                 # noqa: E402
+from holoflow.commands import main  # noqa: E402
+from holoflow.flow.executors import StepTask  # noqa: E402
+from holoflow.flow.store import Store  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[3]
 

@@ -1,6 +1,6 @@
 """CPU kinds in records, the pinned BLAS / NumPy code paths of every step, the `status` bytes line."""
-from holoflow.flow.executors.task import step_env       # the function (the package attribute may be the module)
 from holoflow.flow.executors.step_env import PINNED_ENV, bytes_note, cpu_facts, cpu_kind, isa_class
+from holoflow.flow.executors.task import step_env  # the function (the package attribute may be the module)
 
 V2 = {"cx16", "lahf_lm", "popcnt", "sse4_1", "sse4_2", "ssse3"}
 V3 = V2 | {"avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "abm", "movbe", "xsave"}

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from holoflow.flow.executors.task import step_env       # the function (the package attribute may be the module)
 from holoflow.flow.executors import warm
+from holoflow.flow.executors.task import step_env  # the function (the package attribute may be the module)
 from holoflow.flow.executors.warm import Launcher, first_use, preload, supported
 
 pytestmark = pytest.mark.skipif(not supported(), reason="warm starts need Linux pidfds")
