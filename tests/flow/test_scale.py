@@ -234,6 +234,9 @@ def test_resources_are_validated(tmp_path, capsys):
     pipe = _toy(tmp_path / "p", "  a: {run: slot.py, resources: {gpu: 1}}\n")
     rc, _, err = _cli(capsys, "status", "--pipeline", str(pipe))
     assert rc == 2 and "unknown key 'gpu'" in err and "did you mean 'gpus'" in err
+    pipe = _toy(tmp_path / "p", "  a: {run: slot.py, resources: 2}\n")
+    rc, _, err = _cli(capsys, "status", "--pipeline", str(pipe))
+    assert rc == 2 and "`resources:` is an integer, not a mapping" in err
 
 
 def test_noop_parallel_run_stays_fast_and_light(project, capsys):
