@@ -54,8 +54,10 @@ def main(argv: list[str]) -> int:
         if args.models and args.profile:
             p.error("pull takes --profile P or MODEL names, not both")
         try:
-            paths = pull(pull_targets(args.models, None if args.models else resolve(pipe, profile)),
-                         progress=lambda m: print(m, file=sys.stderr))
+            targets, skipped = pull_targets(args.models, None if args.models else resolve(pipe, profile))
+            for line in skipped:
+                print(line, file=sys.stderr)
+            paths = pull(targets, progress=lambda m: print(m, file=sys.stderr))
         except (PullError, ValueError) as e:
             print(str(e).splitlines()[0], file=sys.stderr)
             return 1
@@ -66,7 +68,7 @@ def main(argv: list[str]) -> int:
     resolved = resolve(pipe, profile)
     if args.models:
         apply_manifest(resolved, Path(args.models))
-    found = needs(resolved)
+    found = needs(resolved, optional=True)
     if args.json:
         print(json.dumps([n.__dict__ for n in found], indent=1))
         return 0

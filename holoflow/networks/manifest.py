@@ -68,29 +68,29 @@ def auto_network(r: "Resolved") -> tuple[str, str, str] | None:
     return getattr(config, "AUTO_NETWORK", None)
 
 
-def needs(resolved: dict[str, "Resolved"]) -> list[ModelNeed]:
-    """Every model the resolved stages' engines load, and the optional network of each ``auto`` engine,
-    looked up locally (no download, no network)."""
+def needs(resolved: dict[str, "Resolved"], optional: bool = False) -> list[ModelNeed]:
+    """Every model the resolved stages' engines load (with ``optional``, also the network of each ``auto``
+    engine: ``ModelNeed.optional``), looked up locally (no download, no network)."""
     from .weights import DEFAULTS, MissingWeights, describe, resolve
 
     out = []
     for name, r in resolved.items():
         auto = auto_network(r)
         wanted = [(param, role, False) for param, role in engine_weights(r)]
-        if auto is not None:
+        if auto is not None and (optional or r.params[auto[0]]):
             wanted.append((auto[0], auto[1], not r.params[auto[0]]))
-        for param, role, optional in wanted:
+        for param, role, maybe in wanted:
             model = str(r.params[param])
             try:
                 path, present = str(resolve(model, role, f"{name}.{param}")), True
             except MissingWeights as e:
                 path, present = str(e), False
-            if optional and not present:
+            if maybe and not present:
                 path = (f"auto runs another engine without it; get it with `holoflow models pull {DEFAULTS[role]}` "
                         f"(or set {name}.{param}=/a/folder)")
             engine = f"{r.engine} -> {auto[2]}" if auto is not None and param == auto[0] else r.engine
             out.append(ModelNeed(name, engine, param, role, model or DEFAULTS.get(role, ""), present, path,
-                                 optional, describe(model or DEFAULTS.get(role, ""))))
+                                 maybe, describe(model or DEFAULTS.get(role, ""))))
     return out
 
 
@@ -261,24 +261,26 @@ class PullError(RuntimeError):
     """``holoflow models pull`` could not fetch a model; ``str(err)`` is one line for the user."""
 
 
-def pull_targets(names: list[str], resolved: dict[str, "Resolved"] | None) -> list[str]:
-    """HF ids (``owner/repo[/sub/path]``) to fetch: each of ``names`` (a role of weights.DEFAULTS or an
-    HF id), or, with ``resolved``, every model its engines load and each ``auto`` engine's network.
-    A role without an HF id (lama) or a local path is a PullError naming what to do instead."""
+def pull_targets(names: list[str], resolved: dict[str, "Resolved"] | None) -> tuple[list[str], list[str]]:
+    """(HF ids ``owner/repo[/sub/path]`` to fetch, one line per model skipped): each of ``names`` (a role
+    of weights.DEFAULTS or an HF id), or, with ``resolved``, every model its engines load and each
+    ``auto`` engine's network. A name that is no HF id is a PullError; a profile's model that is a
+    local path or has no HF repo (lama) is skipped with its line."""
     from .weights import DEFAULTS, _is_pathlike
 
-    if resolved is not None:
-        names = [n.model for n in needs(resolved)]
-    out = []
-    for name in names:
-        model = DEFAULTS.get(name, name) if name in DEFAULTS else name
+    wanted = [(n.role, n.model) for n in needs(resolved, optional=True)] if resolved is not None else \
+        [(name, DEFAULTS[name] if name in DEFAULTS else name) for name in names]
+    out, skipped = [], []
+    for name, model in wanted:
         if not model or _is_pathlike(model) or Path(model).expanduser().exists() or model.count("/") < 1:
-            what = f"role {name}" if name in DEFAULTS else f"'{name}'"
-            raise PullError(f"holoflow models pull: {what} is not a Hugging Face model id (lama: convert big-lama "
-                            f"to a local file, see docs/engines.md); roles: {', '.join(DEFAULTS)}")
-        if model not in out:
+            what = f"{name} ({model})" if model else f"{name} (no Hugging Face repo; see docs/engines.md)"
+            if resolved is None:
+                raise PullError(f"holoflow models pull: {what} is not a Hugging Face model id; roles: "
+                                f"{', '.join(r for r in DEFAULTS if DEFAULTS[r])}, or owner/repo")
+            skipped.append(f"holoflow models: skipping {what}: a local file or folder, not fetched")
+        elif model not in out:
             out.append(model)
-    return out
+    return out, skipped
 
 
 def pull(models: list[str], progress=print) -> list[Path]:

@@ -160,6 +160,7 @@ def test_models_dir_and_explicit_path_feed_auto(tiny_da, tmp_path):
     r = pipeline.resolve(pipe, "preview")
     apply_manifest(r, tmp_path / "m")
     assert r["tangent_depth"].params["model"] == str(tiny_da) and r["metric_align"].params["model"] == ""
+    assert not needs(pipeline.resolve(pipe, "preview"))     # an auto network is listed only when asked for
     need = [n for n in needs(r) if n.stage == "tangent_depth"]
     assert need[0].present and need[0].engine == "auto -> depth_anything" and need[0].about == ""   # a folder
 
@@ -259,6 +260,10 @@ def test_pull_then_list_shows_it_present(tiny_da, tmp_path, monkeypatch, capsys)
     assert main(["pull", "archerfmy0831/sd-t2i-360panoimage/sr-base"]) == 0
     assert calls[-1] == ("archerfmy0831/sd-t2i-360panoimage", ["sr-base", "sr-base/*"])
     assert main(["pull", "lama"]) == 1 and "not a Hugging Face model id" in capsys.readouterr().err
+    calls.clear()
+    assert main(["pull", "--profile", "paper"]) == 0       # every HF model the paper loads; lama skipped
+    assert "skipping lama" in capsys.readouterr().err and ("Intel/zoedepth-nyu-kitti", None) in calls
+    assert ("archerfmy0831/sd-t2i-360panoimage", ["sd-base", "sd-base/*"]) in calls
 
 
 def test_models_random_writes_only_the_roles_asked(tmp_path):
