@@ -1,5 +1,5 @@
 """`holoflow models list [--profile P]` | `holoflow models pull [--profile P | MODEL...]` |
-`holoflow models random DIR [--full] [ROLE...]`: the real-model engines' weights
+`holoflow models random DIR [--full] [--only ROLE]...`: the real-model engines' weights
 (holoflow/networks/manifest.py). Only `pull` downloads, into the user's Hugging Face cache."""
 from __future__ import annotations
 
@@ -31,17 +31,18 @@ def main(argv: list[str]) -> int:
                     "id, e.g. depth-anything/Depth-Anything-V2-Base-hf (CC-BY-NC-4.0)")
     pl.add_argument("--profile", help="what this profile's engines load (comma list allowed)")
     pl.add_argument("--pipeline", default="pipeline.yaml")
-    rnd = sub.add_parser("random", help="write random models of every real architecture (or of ROLEs) + "
-                         "manifest.json")
+    rnd = sub.add_parser("random", help="write random models of every real architecture (or of --only ROLEs) "
+                         "+ manifest.json")
     rnd.add_argument("folder", metavar="DIR")
-    rnd.add_argument("roles", nargs="*", metavar="ROLE", help="only these roles (e.g. depth_anything)")
+    rnd.add_argument("--only", action="append", default=[], metavar="ROLE",
+                     help="only this role (repeatable; e.g. depth_anything)")
     rnd.add_argument("--full", action="store_true", help="published sizes (GBs; for timing), not tiny ones")
     rnd.add_argument("--depth-variant", choices=["small", "large"], default="small",
                      help="Depth Anything at full size: V2 Small (24.8 M, the default model) or Large (335 M)")
     rnd.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
     if args.verb == "random":
-        write_random(Path(args.folder), full=args.full, seed=args.seed, roles=args.roles or None,
+        write_random(Path(args.folder), full=args.full, seed=args.seed, roles=args.only or None,
                      depth_variant=args.depth_variant, progress=lambda m: print(m, file=sys.stderr))
         print(f"holoflow models: random {'full-size' if args.full else 'tiny'} models in {args.folder} "
               f"(noise images at the real compute cost); use: holoflow run --models {args.folder}")

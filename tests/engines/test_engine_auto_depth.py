@@ -267,10 +267,11 @@ def test_pull_then_list_shows_it_present(tiny_da, tmp_path, monkeypatch, capsys)
 
 
 def test_models_random_writes_only_the_roles_asked(tmp_path):
+    from holoflow.commands.models import main
     from holoflow.networks.manifest import read_manifest, write_random
 
-    roles = write_random(tmp_path, roles=["depth_anything"], progress=lambda m: None)
-    assert roles == {"depth_anything": "depth_anything"} and set(read_manifest(tmp_path)) == {"depth_anything"}
+    assert main(["random", str(tmp_path), "--only", "depth_anything"]) == 0
+    assert set(read_manifest(tmp_path)) == {"depth_anything"}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["depth_anything", "manifest.json"]
     with pytest.raises(ValueError, match="unknown role"):
         write_random(tmp_path, roles=["sdxl"], progress=lambda m: None)
