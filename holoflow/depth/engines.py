@@ -95,15 +95,16 @@ def resolve_engine(engine: str, has_truth: bool, *, source: str | None = None, n
     if has_truth:
         return "given", "auto: the imported panorama has a Z channel (radial depth), which is kept as the depth"
     if metric:
-        return "layout", ("auto: metric scale from the layout engine's camera-height rule (eye camera_height above "
-                          "the floor); a metric network runs only by name (engine zoedepth)")
+        return "layout", ("auto: no truth depth; metric scale from the layout engine's camera-height rule (eye "
+                          "camera_height above the floor); a metric network runs only by name (engine zoedepth)")
     if network:
         from holoflow.networks.weights import describe
 
         what = describe(network) or "Depth Anything"
         return "depth_anything", f"auto: relative depth from the network found locally ({what}) at {network}"
-    return "layout", ("auto: no depth network on this machine, so the image-driven layout estimator runs; "
-                      "`holoflow models pull` fetches Depth Anything V2 Small (24.8 M parameters, Apache-2.0)")
+    return "layout", ("auto: no truth depth and no depth network on this machine, so the image-driven layout "
+                      "estimator runs; `holoflow models pull` fetches Depth Anything V2 Small (24.8 M parameters, "
+                      "Apache-2.0)")
 
 
 def simulated_relative(radial: np.ndarray, cos: np.ndarray, seed: int,

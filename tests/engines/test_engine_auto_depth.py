@@ -146,7 +146,7 @@ def test_photo_run_picks_the_network_from_the_hf_cache_and_layout_without(tiny_d
 
     empty = holoflow(*args, hf_home=tmp_path / "empty")
     assert empty.returncode == 0, empty.stderr[-2000:]
-    assert "engine layout (auto: no depth network" in empty.stdout and "holoflow models pull" in empty.stdout
+    assert "engine layout (auto: no truth depth and no depth network" in empty.stdout and "holoflow models pull" in empty.stdout
     assert step_meta(store, "tangent_depth")["engine"]["engine"] == "layout"   # a new key: not the cached network
 
 
