@@ -3,7 +3,8 @@ into radial disparity references; one global scale + offset maps the blended dis
 (Huber IRLS on relative residuals); blended pixels at the sky's border that are mostly sky are made
 sky (docs/depth.md, step 6). Writes depth.exr (Z = radial metres, +inf sky) and
 metric_align.json (scale, offset, residuals, faces used); with a truth depth it records AbsRel,
-RMSE and delta1 of the result (docs/depth.md)."""
+RMSE and delta1 of the result (docs/depth.md). Engine ``given`` (``auto`` on a panorama imported with its
+own Z channel): the given Z, resized to the disparity's grid (nearest), is the depth as it is."""
 from __future__ import annotations
 
 import json
@@ -15,6 +16,7 @@ def main() -> int:
     job = Job.from_argv()
     from holoflow.depth import panorama as pd
     from holoflow.depth.config import MetricAlignParams
+    from holoflow.depth.engines import resolve_engine, truth_source
     from holoflow.depth.inputs import read_disparity, read_pano, read_truth
     from holoflow.geometry.sampling import resize_pano
     from holoflow.io.exr import write_exr
@@ -23,16 +25,26 @@ def main() -> int:
     disparity = read_disparity(job.input_file("disparity", "disparity.exr"))
     pano = resize_pano(read_pano(job.input_file("pano", "pano.exr")), disparity.shape[1])
     truth = read_truth(job.inputs.get("truth"))
-    result = pd.metric_from_disparity(disparity, pano, truth, job.engine, cfg, job.seed, job.device, job.progress)
-    write_exr(job.output("depth.exr"), {"Z": result.depth},
-              {"holoflow.stage": "metric_align", "holoflow.depth_kind": "radial", "holoflow.engine": result.engine["engine"],
-               "holoflow.simulation": int(bool(result.engine.get("simulation")))})
-    report = {"engine": result.engine, "faces": result.faces, **result.fit}
-    if truth is not None:
-        report["truth_metrics"] = pd.score(result.depth, truth)
+    engine, why = resolve_engine(job.engine, truth is not None, source=truth_source(job.inputs.get("truth")),
+                                 metric=True)
+    if engine == "given":
+        if truth is None:
+            raise ValueError("engine 'given' needs a Z channel (radial depth) in the imported panorama")
+        depth = pd.resize_radial(truth, *disparity.shape).astype("float32")
+        facts = {"engine": "given", "why": why, "note": "the imported panorama's own Z channel, kept as the depth"}
+        report = {"engine": facts, "faces": []}
+    else:
+        result = pd.metric_from_disparity(disparity, pano, truth, engine, cfg, job.seed, job.device, job.progress)
+        depth, facts = result.depth, {**result.engine, "why": why}
+        report = {"engine": facts, "faces": result.faces, **result.fit}
+        if truth is not None:
+            report["truth_metrics"] = pd.score(depth, truth)
+    write_exr(job.output("depth.exr"), {"Z": depth},
+              {"holoflow.stage": "metric_align", "holoflow.depth_kind": "radial", "holoflow.engine": facts["engine"],
+               "holoflow.simulation": int(bool(facts.get("simulation")))})
     job.output("metric_align.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
     job.meta(**report)
-    print(f"metric_align: engine {result.engine['engine']} ({result.engine['why']})", flush=True)
+    print(f"metric_align: engine {facts['engine']} ({facts['why']})", flush=True)
     return 0
 
 

@@ -5,6 +5,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -15,6 +16,11 @@ TOY = Path(__file__).parent / "flow" / "fixtures"
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
+# An empty Hugging Face cache: a developer's own downloads (a depth network that `auto` would pick) never
+# change what the tests run; tests that need a cache build one in tmp_path and point HF_HOME at it.
+_EMPTY_HF = tempfile.mkdtemp(prefix="holoflow-tests-hf-")
+os.environ["HF_HOME"] = _EMPTY_HF
+os.environ["HF_HUB_CACHE"] = os.path.join(_EMPTY_HF, "hub")
 
 
 def _devices():

@@ -50,7 +50,8 @@ def main(argv: list[str]) -> int:
 
             models = str(Path(tmp) / "models")
             t0 = time.perf_counter()
-            write_random(Path(models), full=not args.tiny_models, progress=lambda m: print(m, file=sys.stderr))
+            write_random(Path(models), full=not args.tiny_models, progress=lambda m: print(m, file=sys.stderr),
+                         depth_variant="large")
             t_models = time.perf_counter() - t0
         store = Path(tmp) / "artifacts"
         cmd = [sys.executable, "-m", "holoflow", "run", args.prompt, "--profile", args.profile, "--models", models,

@@ -10,7 +10,8 @@ from holoflow.flow.params import Engines, StageParams, param
 
 _FACES = ("(images: [F, h, w, 3] linear, dirs: [F, h, w, 3], cos: [F, h, w], truth_radial: [F, h, w] m | None,"
           " seed, cfg: {cls}, device: str, progress, pano: [H, W, 3] linear)")
-_AUTO = {"auto": "simulated where the input carries a truth depth, else layout (holoflow.depth.engines.resolve_engine)"}
+_AUTO = {"auto": "simulated on a procedural scene's truth, given on an imported Z, else depth_anything where its "
+                 "weights are on the machine (tangent_depth), else layout (holoflow.depth.engines.resolve_engine)"}
 
 
 def _camera_height():
@@ -33,6 +34,7 @@ class TangentDepthParams(StageParams):
         _AUTO,
         weights={"depth_anything": (("model", "depth_anything"),)},
         simulated="holoflow.depth.engines:simulated_relative_engine",
+        given="holoflow.depth.engines:given_relative_engine",
         prior="holoflow.depth.engines:prior_relative_engine",
         layout="holoflow.depth.engines:layout_relative_engine",
         depth_anything="holoflow.depth.engines:depth_anything_engine")
@@ -51,8 +53,15 @@ class TangentDepthParams(StageParams):
     blend_ramp: float = param(0.1, "faces blend with weights falling to 0 over this outer fraction of the "
                               "half-size", gt=0, le=1)
     model: str = param("", "depth_anything: local dir or model id in the user's cache")
+    net_size: int = param(0, "depth_anything: side of the square image the network sees (rounded to a multiple "
+                          "of 14); 0 = the face size", "px", ge=0)
+    net_batch: int = param(4, "depth_anything: faces per forward pass", "faces", ge=1)
     camera_height: float = _camera_height()
     scene: str = _scene()
+
+    #: (param, role, engine) of the network ``auto`` runs when its weights are on the machine
+    #: (holoflow.networks.manifest fills ``model`` before the cache key is made)
+    AUTO_NETWORK = ("model", "depth_anything", "depth_anything")
 
 
 @dataclass(frozen=True)
@@ -64,6 +73,7 @@ class MetricAlignParams(StageParams):
         _AUTO,
         weights={"zoedepth": (("model", "zoedepth"),)},
         simulated="holoflow.depth.engines:simulated_metric_engine",
+        given="holoflow.depth.engines:given_metric_engine",
         prior="holoflow.depth.engines:prior_metric_engine",
         layout="holoflow.depth.engines:layout_metric_engine",
         zoedepth="holoflow.depth.engines:zoedepth_engine")

@@ -20,9 +20,10 @@ Engines (registered by name in holoflow/depth/config.py; docs/depth.md says what
 ``layout`` (no weights, any panorama): the image-driven estimator of holoflow.depth.layout (a room
   layout indoors, ground / vertical / sky outdoors), computed once on the whole panorama and sampled
   into the faces; its metric scale comes from the camera height (``cfg.camera_height``).
-``depth_anything`` / ``zoedepth``: the paper's networks through holoflow.networks (real weights).
-``auto`` (the default): ``simulated`` when the input carries a truth depth (procedural scenes), else
-  ``layout``; ``resolve_engine`` says which and why.
+``given`` (a panorama imported with its own depth): the exact perspective disparity / depth of the
+  given Z channel; metric_align keeps the given Z itself as the scene's metric depth.
+``depth_anything`` / ``zoedepth``: the networks through holoflow.networks (real weights).
+``auto`` (the default): ``resolve_engine``'s rule, which also says which engine ran and why.
 """
 from __future__ import annotations
 
@@ -46,14 +47,63 @@ SIM_METRIC = {"scale_std": 0.04, "noise_std": 0.02}
 PRIOR_LAYOUT = {"floor": 1.6, "ceiling": 1.4, "wall": 4.0}
 
 
-def resolve_engine(engine: str, has_truth: bool) -> tuple[str, str]:
-    """The engine that runs for ``engine`` (``auto`` -> ``simulated`` with a truth, else ``layout``) and
-    why, in one line for the step's output, report and status."""
+#: ``holoflow.engine`` of a base_pano EXR whose Z is the truth of a procedural scene (stages/base_pano.py)
+PROCEDURAL = "procedural"
+
+
+def truth_source(folder, name: str = "pano.exr") -> str | None:
+    """Where the truth input's Z channel comes from, read from the EXR header (no pixels):
+    ``"procedural"`` when the file says base_pano's procedural engine wrote it (its Z is the scene's
+    exact truth), ``"given"`` for any other Z (a user's RGB-D panorama imported with ``--use``), None
+    when there is no such file or no Z channel."""
+    from pathlib import Path
+
+    import OpenEXR
+
+    path = Path(folder) / name if folder is not None else None
+    if path is None or not path.is_file():
+        return None
+    with OpenEXR.File(str(path), header_only=True) as f:
+        header = dict(f.header())
+    if "Z" not in {c.split(".")[-1] for c in _channel_names(header)}:
+        return None
+    made_here = header.get("holoflow.stage") == "base_pano" and header.get("holoflow.engine") == PROCEDURAL
+    return "procedural" if made_here else "given"
+
+
+def _channel_names(header: dict) -> list[str]:
+    """Channel names of an OpenEXR header dict (its ``channels`` entry: a list of channel objects)."""
+    return [getattr(c, "name", str(c)) for c in header.get("channels", [])]
+
+
+def resolve_engine(engine: str, has_truth: bool, *, source: str | None = None, network: str = "",
+                   metric: bool = False) -> tuple[str, str]:
+    """The engine that runs for ``engine`` and why, in one line for the step's output, record and status.
+
+    ``auto``, in this order: a truth depth written by the procedural scene (``source`` "procedural", or
+    ``has_truth`` with no ``source``) -> ``simulated``; a Z channel a user gave (``source`` "given") ->
+    ``given`` (that depth is kept); relative stage with ``network`` (the local weights ``holoflow
+    models`` found, or ``model`` set by the user) -> ``depth_anything``; otherwise ``layout``. The
+    metric stage (``metric``) has no network under auto: its scale is the layout engine's camera-height
+    rule (a metric network runs by name: ``zoedepth``)."""
     if engine != "auto":
         return engine, f"engine {engine!r} was chosen explicitly"
+    if has_truth and source in (None, "procedural"):
+        return "simulated", ("auto: the input carries a procedural scene's truth depth (Z), so the calibrated "
+                             "simulation runs")
     if has_truth:
-        return "simulated", "auto: the input carries a truth depth (Z), so the calibrated simulation runs"
-    return "layout", "auto: the input has no truth depth, so the image-driven layout estimator runs"
+        return "given", "auto: the imported panorama has a Z channel (radial depth), which is kept as the depth"
+    if metric:
+        return "layout", ("auto: no truth depth; metric scale from the layout engine's camera-height rule (eye "
+                          "camera_height above the floor); a metric network runs only by name (engine zoedepth)")
+    if network:
+        from holoflow.networks.weights import describe
+
+        what = describe(network) or "Depth Anything"
+        return "depth_anything", f"auto: relative depth from the network found locally ({what}) at {network}"
+    return "layout", ("auto: no truth depth and no depth network on this machine, so the image-driven layout "
+                      "estimator runs; `holoflow models pull` fetches Depth Anything V2 Small (24.8 M parameters, "
+                      "Apache-2.0)")
 
 
 def simulated_relative(radial: np.ndarray, cos: np.ndarray, seed: int,
@@ -144,8 +194,28 @@ def depth_anything_engine(images, dirs, cos, truth_radial, seed, cfg, device: st
     """``depth_anything`` relative engine (holoflow.networks.depth_anything; weights: ``cfg.model``)."""
     from holoflow.networks import depth_anything
 
-    out = depth_anything.relative_disparity(images, cfg.model, device, progress)
-    return np.asarray(out, dtype=np.float32), {"engine": "depth_anything", "model": cfg.model}
+    side = depth_anything.network_side(cfg.net_size or images.shape[1])
+    out = depth_anything.relative_disparity(images, cfg.model, device, progress, batch=cfg.net_batch, side=side)
+    return np.asarray(out, dtype=np.float32), {"engine": "depth_anything", "model": cfg.model, "net_side": side}
+
+
+def given_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                          progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``given`` relative engine: the exact perspective disparity 1/z of the given Z (sky 0)."""
+    z = _need_given(truth_radial) * cos
+    _report(progress, len(z))
+    return np.where(np.isfinite(z) & (z > 0), 1.0 / np.where(z > 0, z, 1.0), 0.0).astype(np.float32), {
+        "engine": "given", "note": "the imported panorama's own Z channel"}
+
+
+def given_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
+                        progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """``given`` metric engine: the perspective depth z of the given Z (metres, +inf sky). The
+    metric_align stage keeps the given Z itself as the depth (stages/metric_align.py)."""
+    z = _need_given(truth_radial) * cos
+    _report(progress, len(z))
+    return np.where(np.isfinite(z) & (z > 0), z, np.inf).astype(np.float32), {
+        "engine": "given", "note": "the imported panorama's own Z channel"}
 
 
 def simulated_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
@@ -215,6 +285,12 @@ def _need_truth(truth_radial: np.ndarray | None, network: str) -> np.ndarray:
         raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
                          f"panorama); use engine 'prior' or '{network}' for a panorama without one")
     return truth_radial
+
+
+def _need_given(truth_radial: np.ndarray | None) -> np.ndarray:
+    if truth_radial is None:
+        raise ValueError("engine 'given' needs a Z channel (radial depth) in the imported panorama")
+    return np.asarray(truth_radial, dtype=np.float64)
 
 
 def _report(progress: Progress, n: int) -> None:

@@ -2,7 +2,7 @@
 
 ``full=False``: tiny widths and depths, for tests (seconds on a CPU). ``full=True``: the published
 sizes (SD 1.5 UNet/VAE/CLIP-L text encoder, ControlNet, RRDBNet x4plus, big-lama, Depth Anything
-large, ZoeDepth NK with BEiT-L/384), for timing the engines at paper resolution without the real
+V2 Small or Large, ZoeDepth NK with BEiT-L/384), for timing the engines at paper resolution without the real
 weights: compute cost does not depend on the weight values. Every engine loads these through its
 own loading code (``from_pretrained`` from the folder, or its state-dict loader), as it would a
 user's download. The outputs of random models are meaningless images; only shapes, ranges, seams,
@@ -117,19 +117,30 @@ def save_lama(path: Path, full: bool = False, seed: int = 0) -> Path:
     return path
 
 
-def save_depth_anything(folder: Path, full: bool = False, seed: int = 0) -> Path:
-    """Depth Anything (DINOv2 backbone + DPT head) folder with its preprocessor config."""
+def save_depth_anything(folder: Path, full: bool = False, seed: int = 0, variant: str = "small") -> Path:
+    """Depth Anything (DINOv2 backbone + DPT head) folder with its preprocessor config. ``full``: the
+    published size of ``variant`` "small" (V2 Small: ViT-S/14, 24.8 M parameters, the default model) or
+    "large" (v1 / V2 Large: ViT-L/14, 335 M); otherwise a tiny model of the same classes."""
     import torch
     from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config, DPTImageProcessorPil
 
     torch.manual_seed(seed)
-    if full:   # Depth Anything large: ViT-L/14, features from layers 5, 12, 18, 24
+    if full and variant == "large":   # ViT-L/14, features from layers 5, 12, 18, 24
         backbone = Dinov2Config(hidden_size=1024, num_hidden_layers=24, num_attention_heads=16, intermediate_size=4096,
                                 image_size=518, patch_size=14, reshape_hidden_states=False,
                                 out_features=["stage5", "stage12", "stage18", "stage24"])
         cfg = DepthAnythingConfig(backbone_config=backbone, reassemble_hidden_size=1024, fusion_hidden_size=256,
                                   neck_hidden_sizes=[256, 512, 1024, 1024], head_hidden_size=32)
         side = 518
+    elif full and variant == "small":  # V2 Small: ViT-S/14, features from layers 3, 6, 9, 12
+        backbone = Dinov2Config(hidden_size=384, num_hidden_layers=12, num_attention_heads=6, intermediate_size=1536,
+                                image_size=518, patch_size=14, reshape_hidden_states=False,
+                                out_features=["stage3", "stage6", "stage9", "stage12"])
+        cfg = DepthAnythingConfig(backbone_config=backbone, reassemble_hidden_size=384, fusion_hidden_size=64,
+                                  neck_hidden_sizes=[48, 96, 192, 384], head_hidden_size=32)
+        side = 518
+    elif full:
+        raise ValueError(f"unknown Depth Anything variant {variant!r}; use small or large")
     else:
         backbone = Dinov2Config(hidden_size=16, num_hidden_layers=4, num_attention_heads=2, intermediate_size=32,
                                 image_size=56, patch_size=14, reshape_hidden_states=False,

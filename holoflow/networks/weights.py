@@ -1,6 +1,6 @@
 """Where real-model weights come from: a local path, or a model id already in the user's HF cache.
 
-Nothing here downloads. A model is given as
+Nothing here downloads (``holoflow models pull`` does: holoflow.networks.manifest). A model is given as
 
 - a local directory or file (``/data/models/sd15``, ``~/big-lama.safetensors``), used as is;
 - a Hugging Face model id, optionally with a sub-path inside the repo
@@ -25,12 +25,33 @@ DEFAULTS: dict[str, str] = {
     "tile_base": "archerfmy0831/sd-t2i-360panoimage/sr-base",
     "controlnet_tile": "archerfmy0831/sd-t2i-360panoimage/sr-control",
     "realesrgan": "archerfmy0831/sd-t2i-360panoimage/RealESRGAN_x2plus.pth",
-    "depth_anything": "LiheYoung/depth-anything-large-hf",
+    "depth_anything": "depth-anything/Depth-Anything-V2-Small-hf",   # the CPU default; larger ones by name
     "zoedepth": "Intel/zoedepth-nyu-kitti",
     "lama": "",  # no official HF repo: a local file converted from big-lama (docs/engines.md)
 }
 
 WEIGHT_SUFFIXES = (".safetensors", ".pth", ".pt", ".bin")
+
+# Models a user may name (``--set STAGE.model=ID``, ``holoflow models pull ID``): HF id -> (what it is,
+# parameters, licence of the weights as the model card states it). Listed wherever a model is listed.
+KNOWN: dict[str, tuple[str, str, str]] = {
+    "depth-anything/Depth-Anything-V2-Small-hf": ("Depth Anything V2 Small (relative)", "24.8 M", "Apache-2.0"),
+    "depth-anything/Depth-Anything-V2-Base-hf": ("Depth Anything V2 Base (relative)", "97.5 M", "CC-BY-NC-4.0"),
+    "depth-anything/Depth-Anything-V2-Large-hf": ("Depth Anything V2 Large (relative)", "335.3 M", "CC-BY-NC-4.0"),
+    "LiheYoung/depth-anything-large-hf": ("Depth Anything v1 Large (relative; the paper's)", "335.3 M", "Apache-2.0"),
+    "Intel/zoedepth-nyu-kitti": ("ZoeDepth NK (metric)", "", "MIT"),
+}
+
+
+def describe(model: str) -> str:
+    """'NAME, N parameters, licence L' for a KNOWN model id (the repo part of ``model``, or a snapshot
+    folder of the HF cache: ``.../models--ORG--NAME/snapshots/REV``), else ''."""
+    cached = [part for part in Path(model).parts if part.startswith("models--")]
+    repo = cached[-1][len("models--"):].replace("--", "/", 1) if cached else "/".join(model.split("/")[:2])
+    known = KNOWN.get(repo)
+    if not known:
+        return ""
+    return f"{known[0]}, " + (f"{known[1]} parameters, " if known[1] else "") + f"licence {known[2]}"
 
 
 class MissingWeights(UserError, RuntimeError):
@@ -74,7 +95,8 @@ def resolve(model: str, role: str, param: str) -> Path:
     from huggingface_hub.errors import LocalEntryNotFoundError
 
     hint = (f"{role}: '{model}' is not in the local Hugging Face cache ({_cache_dir()}); download it with "
-            f"`hf download {repo}` (or save it to a folder and set {param}=/that/folder)")
+            f"`holoflow models pull {model}` or `hf download {repo}` (or save it to a folder and set "
+            f"{param}=/that/folder)")
     try:
         root = Path(snapshot_download(repo, local_files_only=True))
     except (LocalEntryNotFoundError, OSError, ValueError):

@@ -329,7 +329,7 @@ def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room
     seen = {}
 
     def fake(kind, make):
-        def engine(images, model="", device="cpu", progress=None):
+        def engine(images, model="", device="cpu", progress=None, **kw):
             seen[kind] = np.array(images)
             progress(0, len(images), "images")  # a 2-argument callback raises TypeError here
             progress(len(images), len(images), "images")
