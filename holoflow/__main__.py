@@ -1,4 +1,5 @@
 """`python -m holoflow ...` is the `holoflow` command."""
+
 import sys
 
 from .commands import main

@@ -7,6 +7,7 @@ inputs (each input is a directory holding one upstream stage's outputs), writes 
 
 This module imports nothing heavy, so a stage pays only for what it uses.
 """
+
 from __future__ import annotations
 
 import json
@@ -18,15 +19,21 @@ from pathlib import Path
 from typing import Any, Callable, NoReturn, TypeVar
 
 #: environment variables that size the thread pools of the numeric libraries a step may load
-THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS",
-               "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+THREAD_VARS = (
+    "OMP_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "NUMBA_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+)
 
 #: a progress callback, (done, total, what), as :meth:`Job.progress` takes it: engines and library loops
 #: take one (or None), so a stage program passes ``job.progress`` straight through
 Progress = Callable[[int, int, str], None] | None
 
 P = TypeVar("P")
-_loaded: list["Job"] = []      # the job this process loaded: run_main checks its outputs
+_loaded: list["Job"] = []  # the job this process loaded: run_main checks its outputs
 
 
 @dataclass
@@ -42,7 +49,7 @@ class Job:
     output_dir: Path
     work_dir: Path
     device: str = "cpu"
-    cpus: int = 1                  # the stage's resources.cpus, capped at this host's cores: its thread count
+    cpus: int = 1  # the stage's resources.cpus, capped at this host's cores: its thread count
     extra: dict[str, Any] = field(default_factory=dict)
     _last_progress: float = field(default=0.0, repr=False)
 
@@ -100,14 +107,17 @@ class Job:
         try:
             return self.inputs[name]
         except KeyError:
-            raise SystemExit(f"{self.stage}: input '{name}' missing from job spec "
-                             f"(has: {sorted(self.inputs)}); check pipeline.yaml") from None
+            raise SystemExit(
+                f"{self.stage}: input '{name}' missing from job spec (has: {sorted(self.inputs)}); check pipeline.yaml"
+            ) from None
 
     def input_file(self, name: str, filename: str) -> Path:
         path = self.input(name) / filename
         if not path.exists():
-            raise SystemExit(f"{self.stage}: input '{name}' has no file '{filename}' "
-                             f"(has: {sorted(p.name for p in self.input(name).iterdir())})")
+            raise SystemExit(
+                f"{self.stage}: input '{name}' has no file '{filename}' "
+                f"(has: {sorted(p.name for p in self.input(name).iterdir())})"
+            )
         return path
 
     def output(self, filename: str) -> Path:
@@ -164,8 +174,10 @@ def _gpu_peak_meta() -> None:
     used CUDA (torch imported and its CUDA context made); nothing otherwise."""
     torch = sys.modules.get("torch")
     if torch is not None and torch.cuda.is_initialized():
-        emit("meta", {"gpu_peak_mb": round(torch.cuda.max_memory_allocated() / 2**20, 1),
-                      "gpu": torch.cuda.get_device_name()})
+        emit(
+            "meta",
+            {"gpu_peak_mb": round(torch.cuda.max_memory_allocated() / 2**20, 1), "gpu": torch.cuda.get_device_name()},
+        )
 
 
 def emit(kind: str, payload: dict[str, Any]) -> None:

@@ -6,6 +6,7 @@ words build a Scene (holoflow.scene) that is ray-cast to the panorama; Z holds t
 ``diffusion360``: the paper's Diffusion360 base model with circular latent blending
 (holoflow.networks.diffusion360); no depth.
 """
+
 from __future__ import annotations
 
 from holoflow.stage import Job, run_main
@@ -19,8 +20,12 @@ def main() -> int:
     cfg = job.config(BasePanoParams)
     pano = BasePanoParams.ENGINES.get(job.engine)(job.prompt, cfg, job.seed, job.device, job.progress)
     depth = {} if pano.depth is None else {"Z": pano.depth}
-    write_rgb(job.output("pano.exr"), pano.rgb,
-              {"holoflow.stage": "base_pano", "holoflow.engine": job.engine, **pano.attrs}, **depth)
+    write_rgb(
+        job.output("pano.exr"),
+        pano.rgb,
+        {"holoflow.stage": "base_pano", "holoflow.engine": job.engine, **pano.attrs},
+        **depth,
+    )
     for name, text in pano.files.items():
         job.output(name).write_text(text)
     job.meta(engine=job.engine, **pano.meta)

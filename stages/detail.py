@@ -7,6 +7,7 @@ tiles with circular blending across the seam (holoflow.networks.controlnet_tile)
 nothing styled or resized passes through unchanged with any engine (holoflow/imageops/photo.py); an
 input wider than the stage's size keeps its own (up to ``max_width``).
 """
+
 from __future__ import annotations
 
 from holoflow.stage import Job, run_main
@@ -20,14 +21,21 @@ def main() -> int:
 
     cfg = job.config(DetailParams)
     path = job.input_file("pano", "pano.exr")
-    pano, src = read_rgb_attrs(path)                                       # [H, W, 3] linear, header
-    if unaltered(src):                                                                 # nothing to restore
+    pano, src = read_rgb_attrs(path)  # [H, W, 3] linear, header
+    if unaltered(src):  # nothing to restore
         out, meta = pano, {"passthrough": "user's photo, not styled or resized"}
     else:
         out, meta = DetailParams.ENGINES.get(job.engine)(pano, job.prompt, cfg, job.seed, job.device, job.progress)
     job.meta(engine=job.engine, max_width=cfg.max_width, **meta)
-    write_rgb(job.output("pano.exr"), out, {"holoflow.stage": "detail", "holoflow.engine": job.engine,
-                                            **provenance(src, same_pixels(out, pano), cfg.max_width)})
+    write_rgb(
+        job.output("pano.exr"),
+        out,
+        {
+            "holoflow.stage": "detail",
+            "holoflow.engine": job.engine,
+            **provenance(src, same_pixels(out, pano), cfg.max_width),
+        },
+    )
     return 0
 
 

@@ -5,6 +5,7 @@ SuperSplat), scene.glb (glTF KHR_gaussian_splatting, +Y up) and mesh.glb (vertex
 from detail's pano.exr and metric_align's depth.exr at P_f's resolution, depth discontinuities cut,
 sky as a far dome or left out). Formats, axes and error bounds: holoflow/export/, docs/viewers.md.
 """
+
 from __future__ import annotations
 
 from holoflow.stage import Job, run_main
@@ -23,9 +24,14 @@ def main() -> int:
     sizes = ExportParams.ENGINES.get(job.engine)(fields, job.output_dir, formats, job.cpus)
     mesh_info = {}
     if "mesh" in formats:
-        data, mesh_info = panorama_mesh_glb(read_rgb(job.input_file("pano", "pano.exr")),
-                                            read_radial_depth(job.input_file("depth", "depth.exr")),
-                                            cfg.mesh_width, cfg.mesh_edge_threshold, cfg.mesh_sky, cfg.sky_radius)
+        data, mesh_info = panorama_mesh_glb(
+            read_rgb(job.input_file("pano", "pano.exr")),
+            read_radial_depth(job.input_file("depth", "depth.exr")),
+            cfg.mesh_width,
+            cfg.mesh_edge_threshold,
+            cfg.mesh_sky,
+            cfg.sky_radius,
+        )
         job.output(FORMATS["mesh"]).write_bytes(data)
         sizes[FORMATS["mesh"]] = len(data)
     job.meta(gaussians=len(fields["x"]), bytes=sizes, **mesh_info)

@@ -5,6 +5,7 @@ sky (docs/depth.md, step 6). Writes depth.exr (Z = radial metres, +inf sky) and
 metric_align.json (scale, offset, residuals, faces used); with a truth depth it records AbsRel,
 RMSE and delta1 of the result (docs/depth.md). Engine ``given`` (``auto`` on a panorama imported with its
 own Z channel): the given Z, resized to the disparity's grid (nearest), is the depth as it is."""
+
 from __future__ import annotations
 
 import json
@@ -25,8 +26,9 @@ def main() -> int:
     disparity = read_disparity(job.input_file("disparity", "disparity.exr"))
     pano = resize_pano(read_pano(job.input_file("pano", "pano.exr")), disparity.shape[1])
     truth = read_truth(job.inputs.get("truth"))
-    engine, why = resolve_engine(job.engine, truth is not None, source=truth_source(job.inputs.get("truth")),
-                                 metric=True)
+    engine, why = resolve_engine(
+        job.engine, truth is not None, source=truth_source(job.inputs.get("truth")), metric=True
+    )
     if engine == "given":
         if truth is None:
             raise ValueError("engine 'given' needs a Z channel (radial depth) in the imported panorama")
@@ -39,14 +41,20 @@ def main() -> int:
         report = {"engine": facts, "faces": result.faces, **result.fit}
         if truth is not None:
             report["truth_metrics"] = pd.score(depth, truth)
-    write_exr(job.output("depth.exr"), {"Z": depth},
-              {"holoflow.stage": "metric_align", "holoflow.depth_kind": "radial", "holoflow.engine": facts["engine"],
-               "holoflow.simulation": int(bool(facts.get("simulation")))})
+    write_exr(
+        job.output("depth.exr"),
+        {"Z": depth},
+        {
+            "holoflow.stage": "metric_align",
+            "holoflow.depth_kind": "radial",
+            "holoflow.engine": facts["engine"],
+            "holoflow.simulation": int(bool(facts.get("simulation"))),
+        },
+    )
     job.output("metric_align.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
     job.meta(**report)
     print(f"metric_align: engine {facts['engine']} ({facts['why']})", flush=True)
     return 0
-
 
 
 if __name__ == "__main__":

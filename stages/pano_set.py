@@ -7,6 +7,7 @@ wrap-aware (holoflow.geometry.sampling.equirect_to_pinhole). Writes views/NNN.ex
 cameras.json (docs/artifacts.md) and a nerfstudio transforms.json. Warns (and records in @meta) when
 the rig leaves part of the sphere unseen.
 """
+
 from __future__ import annotations
 
 from holoflow.stage import Job, run_main
@@ -33,8 +34,11 @@ def main() -> int:
     files = [f"views/{n}.exr" for n in names]
     for start, views in equirect_to_pinhole_batches(pano, K, viewmats, size, size):  # [n, 3, size, size]
         for i, view in enumerate(views, start):
-            write_rgb(job.output(files[i]), view.permute(1, 2, 0).cpu().numpy(),
-                      {"holoflow.stage": "pano_set", "holoflow.camera": names[i]})
+            write_rgb(
+                job.output(files[i]),
+                view.permute(1, 2, 0).cpu().numpy(),
+                {"holoflow.stage": "pano_set", "holoflow.camera": names[i]},
+            )
         job.progress(start + len(views), count, "views")
     cams = cameras_json(K, viewmats, size, size, names, files)
     write_cameras(job.output("cameras.json"), cams)
@@ -42,10 +46,18 @@ def main() -> int:
     cover = rig_coverage(K.double(), viewmats.double(), size, size, 256, 512)
     unseen = float((cover == 0).double().mean())
     if unseen > 0:
-        print(f"pano_set: warning: {100 * unseen:.2f}% of the sphere is seen by no base camera "
-              f"({count} cameras at {fov} deg); raise cameras or fov_deg")
-    job.meta(cameras=count, size=size, fov_deg=fov, focal_px=round(float(K[0, 0]), 4), unseen_fraction=unseen,
-             max_overlap=int(cover.max()))
+        print(
+            f"pano_set: warning: {100 * unseen:.2f}% of the sphere is seen by no base camera "
+            f"({count} cameras at {fov} deg); raise cameras or fov_deg"
+        )
+    job.meta(
+        cameras=count,
+        size=size,
+        fov_deg=fov,
+        focal_px=round(float(K[0, 0]), 4),
+        unseen_fraction=unseen,
+        max_overlap=int(cover.max()),
+    )
     return 0
 
 

@@ -10,6 +10,7 @@ linear; A = 1 where a non-edge point landed, 0 = missing: pre_opt's loss mask; s
 point landed; K = 0 above, 1 below, 2 left, 3 right), cameras.json (kind "supplementary", base = base
 camera index) and transforms.json.
 """
+
 from __future__ import annotations
 
 
@@ -52,18 +53,26 @@ def main() -> int:
         bases.append(b)
         missing.append(1.0 - float(hit.mean()))
         unseen.append(1.0 - float(seen.mean()))
-        write_rgb(job.output(files[-1]), img.float().cpu().numpy(),
-                  {"holoflow.stage": "pcd_set", "holoflow.camera": names[-1], "holoflow.side": SUPPLEMENTARY[k]},
-                  A=hit.float().cpu().numpy(), seen=seen.float().cpu().numpy())
+        write_rgb(
+            job.output(files[-1]),
+            img.float().cpu().numpy(),
+            {"holoflow.stage": "pcd_set", "holoflow.camera": names[-1], "holoflow.side": SUPPLEMENTARY[k]},
+            A=hit.float().cpu().numpy(),
+            seen=seen.float().cpu().numpy(),
+        )
         job.progress(j + 1, n, "views")
     cams = cameras_json(K, pcd.viewmats, W, H, names, files, kinds=["supplementary"] * n, bases=bases)
     write_cameras(job.output("cameras.json"), cams)
     write_transforms(job.output("transforms.json"), cams)
-    job.meta(views=n, points=int(len(xyz)), edge_points_dropped=len(pcd.edge_points),
-             missing_fraction=round(sum(missing) / len(missing), 6),
-             unseen_fraction=round(sum(unseen) / len(unseen), 6),
-             splat_radius=cfg.splat_radius if cfg.splat_radius > 0 else "auto",
-             median_depth=[round(m, 4) for m in pcd.medians])
+    job.meta(
+        views=n,
+        points=int(len(xyz)),
+        edge_points_dropped=len(pcd.edge_points),
+        missing_fraction=round(sum(missing) / len(missing), 6),
+        unseen_fraction=round(sum(unseen) / len(unseen), 6),
+        splat_radius=cfg.splat_radius if cfg.splat_radius > 0 else "auto",
+        median_depth=[round(m, 4) for m in pcd.medians],
+    )
     return 0
 
 

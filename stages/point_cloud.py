@@ -6,6 +6,7 @@ background layer under the silhouettes) and P_s (the PCD set's cloud): holoflow/
 pf.json records P_f's sampling, which the Gaussians' footprints need. PLY colours are 8-bit sRGB
 (docs/conventions.md); pf.ply carries normals (nx ny nz); pano.exr is linear.
 """
+
 from __future__ import annotations
 
 import json
@@ -23,22 +24,24 @@ def main() -> int:
     from holoflow.io.ply import write_points
 
     cfg = job.config(PointCloudParams)
-    rgb = torch.from_numpy(read_rgb(job.input_file("pano", "pano.exr")))               # [H, W, 3] linear
+    rgb = torch.from_numpy(read_rgb(job.input_file("pano", "pano.exr")))  # [H, W, 3] linear
     channels, attrs = read_exr(job.input_file("depth", "depth.exr"))
     if "Z" not in channels:
         raise ValueError(f"depth.exr has no Z channel (has {sorted(channels)})")
     kind = attrs.get("holoflow.depth_kind", "radial")
     if kind != "radial":
         raise ValueError(f"depth.exr holds {kind} depth; point_cloud needs radial (equirect) depth")
-    result = point_clouds(rgb, torch.from_numpy(channels["Z"]), cfg, job.progress)   # radial m, inf = sky
+    result = point_clouds(rgb, torch.from_numpy(channels["Z"]), cfg, job.progress)  # radial m, inf = sky
     for name, cloud in result.clouds.items():
         normals = None if cloud.normals is None else cloud.normals.float().numpy()
         write_points(job.output(f"{name}.ply"), cloud.xyz.float().numpy(), cloud.rgb.numpy(), normals)
     job.output("pf.json").write_text(json.dumps(result.pf, sort_keys=True))
     job.meta(**result.meta)
     meta = result.meta
-    print(f"point_cloud: {meta['points']}, shell radius {meta['shell_radius']:.3f} m, "
-          f"sky {100 * meta['sky_fraction']:.2f}%")
+    print(
+        f"point_cloud: {meta['points']}, shell radius {meta['shell_radius']:.3f} m, "
+        f"sky {100 * meta['sky_fraction']:.2f}%"
+    )
     if meta["polar_detail"] is not None:
         on = [k for k in ("north", "south") if (meta["polar_caps"] or {}).get(k)]
         lost = ", ".join(f"{k} {meta['polar_detail'][k]:.3g}" for k in ("north", "south", "sides"))

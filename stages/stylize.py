@@ -9,6 +9,7 @@ SD 1.5 + ControlNet Lineart conditioned on the lineart of the base panorama
 for passes through unchanged with any engine, at its own size up to ``max_width`` (a wider one is
 resized to that here, once; holoflow/imageops/photo.py).
 """
+
 from __future__ import annotations
 
 from holoflow.stage import Job, run_main
@@ -23,14 +24,19 @@ def main() -> int:
 
     cfg = job.config(StylizeParams)
     path = job.input_file("pano", "pano.exr")
-    base, src = read_rgb_attrs(path)                                       # [H, W, 3] linear, header
-    if unaltered(src) and requested_style(job.prompt, cfg.style) is None:            # the photo stays the photo
+    base, src = read_rgb_attrs(path)  # [H, W, 3] linear, header
+    if unaltered(src) and requested_style(job.prompt, cfg.style) is None:  # the photo stays the photo
         out, lines, attrs, meta = unstyled_photo(base, cfg.width, cfg.height, cfg.max_width)
     else:
-        out, lines, attrs, meta = StylizeParams.ENGINES.get(job.engine)(base, job.prompt, cfg, job.seed,
-                                                                       job.device, job.progress)
-    attrs = {"holoflow.stage": "stylize", "holoflow.engine": job.engine, **attrs,
-             **provenance(src, same_pixels(out, base), cfg.max_width)}
+        out, lines, attrs, meta = StylizeParams.ENGINES.get(job.engine)(
+            base, job.prompt, cfg, job.seed, job.device, job.progress
+        )
+    attrs = {
+        "holoflow.stage": "stylize",
+        "holoflow.engine": job.engine,
+        **attrs,
+        **provenance(src, same_pixels(out, base), cfg.max_width),
+    }
     meta["max_width"] = cfg.max_width
     job.meta(engine=job.engine, **meta)
     write_rgb(job.output("pano.exr"), out, attrs)

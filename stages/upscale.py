@@ -5,6 +5,7 @@ Lanczos-3 through OpenImageIO (holoflow.imageops.resize). ``realesrgan``: Real-E
 wrap-padded at the seam (holoflow.networks.realesrgan). An input wider than the stage's size keeps its
 own (up to ``max_width``; holoflow/imageops/photo.py).
 """
+
 from __future__ import annotations
 
 from holoflow.stage import Job, run_main
@@ -18,11 +19,18 @@ def main() -> int:
 
     cfg = job.config(UpscaleParams)
     path = job.input_file("pano", "pano.exr")
-    pano, src = read_rgb_attrs(path)                                       # [H, W, 3] linear, header
+    pano, src = read_rgb_attrs(path)  # [H, W, 3] linear, header
     out, meta = UpscaleParams.ENGINES.get(job.engine)(pano, job.prompt, cfg, job.seed, job.device, job.progress)
     job.meta(engine=job.engine, max_width=cfg.max_width, **meta)
-    write_rgb(job.output("pano.exr"), out, {"holoflow.stage": "upscale", "holoflow.engine": job.engine,
-                                            **provenance(src, same_pixels(out, pano), cfg.max_width)})
+    write_rgb(
+        job.output("pano.exr"),
+        out,
+        {
+            "holoflow.stage": "upscale",
+            "holoflow.engine": job.engine,
+            **provenance(src, same_pixels(out, pano), cfg.max_width),
+        },
+    )
     return 0
 
 

@@ -1,5 +1,6 @@
 """Shared fixtures: numeric tests run on every available device and in float32 and float64; the toy
 project (tests/flow/fixtures: a pipeline of small programs) copied into a temp folder."""
+
 import json
 import os
 import shutil
@@ -65,10 +66,8 @@ class Project:
 
     def proc(self, *args, **kw):
         """holoflow as its own process (Popen), for kills and concurrency."""
-        cmd = [sys.executable, "-m", "holoflow", args[0], "--pipeline", str(self.root / "pipeline.yaml"),
-               *args[1:]]
-        return subprocess.Popen(cmd, cwd=self.root, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True, **kw)
+        cmd = [sys.executable, "-m", "holoflow", args[0], "--pipeline", str(self.root / "pipeline.yaml"), *args[1:]]
+        return subprocess.Popen(cmd, cwd=self.root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
 
     def store_record(self, summary, stage):
         """The key record of ``stage`` in a run summary."""

@@ -1,5 +1,6 @@
 """docs/stages.md's param tables are the ones generated from the stages' param classes, and every
 local link and picture in the user docs exists."""
+
 import re
 from pathlib import Path
 
@@ -14,8 +15,9 @@ def test_stage_param_tables_are_generated_from_the_param_classes():
     pipe = pipeline.load(ROOT / "pipeline.yaml")
     text = (ROOT / "docs" / "stages.md").read_text()
     assert set(re.findall(r"<!-- params:(\w+) -->", text)) == set(pipe.stages)
-    assert update_doc(text, pipe) == text, \
+    assert update_doc(text, pipe) == text, (
         "docs/stages.md is out of date: run `holoflow params --update-docs docs/stages.md`"
+    )
 
 
 def test_doc_links_and_pictures_exist():

@@ -1,6 +1,7 @@
 """Every page of docs/ points at things that exist: relative links (and their #anchors), and the
 project paths it names (holoflow/..., stages/..., tests/..., docs/...). The pages describe how things
 are; the history lives in CHANGELOG.md, so no page cites an issue or a stop number."""
+
 import re
 from pathlib import Path
 
@@ -48,7 +49,10 @@ def test_anchor_of_a_heading():
 
 
 def test_docs_cite_no_issue_or_stop_numbers():
-    found = [f"{p.name}:{n}" for p in (ROOT / "docs").glob("*.md")
-             for n, line in enumerate(p.read_text().splitlines(), 1)
-             if re.search(r"(stop|issue) [0-9]+", line, flags=re.I)]
+    found = [
+        f"{p.name}:{n}"
+        for p in (ROOT / "docs").glob("*.md")
+        for n, line in enumerate(p.read_text().splitlines(), 1)
+        if re.search(r"(stop|issue) [0-9]+", line, flags=re.I)
+    ]
     assert not found, f"history belongs in CHANGELOG.md: {found}"

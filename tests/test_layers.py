@@ -1,6 +1,7 @@
 """The package's shape: no import cycle between any two files of holoflow/, the workflow core
 (holoflow/flow) imports no domain package, the commands sit on top, only the public faces stay at the
 package root, and the command-line path stays light."""
+
 import ast
 import subprocess
 import sys
@@ -11,7 +12,7 @@ import pytest
 import holoflow
 
 PACKAGE = Path(holoflow.__file__).parent
-ROOT_MODULES = {"__init__", "__main__", "stage"}      # the public faces: the package, `python -m`, stage programs
+ROOT_MODULES = {"__init__", "__main__", "stage"}  # the public faces: the package, `python -m`, stage programs
 # flow reads and writes files through io (file formats), which decodes 8-bit images with the colour module;
 # both are leaves: they import nothing else of holoflow
 FLOW_MAY_IMPORT = {"holoflow", "holoflow.flow", "holoflow.stage", "holoflow.io", "holoflow.imageops.color"}
@@ -39,7 +40,7 @@ def _imports(name: str, file: Path, modules: dict[str, Path]) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
-                up = package.split(".")[:len(package.split(".")) - node.level + 1]
+                up = package.split(".")[: len(package.split(".")) - node.level + 1]
                 base = ".".join(up + ([base] if base else []))
             targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
         else:
@@ -99,27 +100,52 @@ def _within(module: str, packages) -> bool:
 
 
 def test_flow_imports_no_domain_package():
-    wrong = {(m, d) for m, deps in _graph().items() if _within(m, ["holoflow.flow"])
-             for d in deps if not (d == "holoflow" or _within(d, FLOW_MAY_IMPORT - {"holoflow"}))}
+    wrong = {
+        (m, d)
+        for m, deps in _graph().items()
+        if _within(m, ["holoflow.flow"])
+        for d in deps
+        if not (d == "holoflow" or _within(d, FLOW_MAY_IMPORT - {"holoflow"}))
+    }
     assert not wrong, sorted(wrong)
 
 
 @pytest.mark.parametrize("leaf", sorted(LEAVES))
 def test_what_flow_reads_through_is_a_leaf(leaf):
-    wrong = {(m, d) for m, deps in _graph().items() if _within(m, [leaf]) for d in deps
-             if not _within(d, LEAVES[leaf] | {leaf})}
+    wrong = {
+        (m, d)
+        for m, deps in _graph().items()
+        if _within(m, [leaf])
+        for d in deps
+        if not _within(d, LEAVES[leaf] | {leaf})
+    }
     assert not wrong, sorted(wrong)
 
 
 def test_nothing_below_imports_the_commands():
-    wrong = {(m, d) for m, deps in _graph().items() if not m.startswith(("holoflow.commands", "holoflow.__main__"))
-             for d in deps if d.startswith("holoflow.commands")}
+    wrong = {
+        (m, d)
+        for m, deps in _graph().items()
+        if not m.startswith(("holoflow.commands", "holoflow.__main__"))
+        for d in deps
+        if d.startswith("holoflow.commands")
+    }
     assert not wrong, sorted(wrong)
 
 
 TOOLS = ["holoflow.bench", "holoflow.commands", "holoflow.evaluation", "holoflow.report"]
-DOMAIN = ["holoflow.scene", "holoflow.imageops", "holoflow.depth", "holoflow.geometry", "holoflow.splat",
-          "holoflow.recon", "holoflow.export", "holoflow.networks", "holoflow.quality", "holoflow.io"]
+DOMAIN = [
+    "holoflow.scene",
+    "holoflow.imageops",
+    "holoflow.depth",
+    "holoflow.geometry",
+    "holoflow.splat",
+    "holoflow.recon",
+    "holoflow.export",
+    "holoflow.networks",
+    "holoflow.quality",
+    "holoflow.io",
+]
 
 
 def test_no_domain_package_imports_a_tool_package():
@@ -131,20 +157,36 @@ def test_only_the_public_faces_at_the_package_root():
     assert {f.stem for f in PACKAGE.glob("*.py")} == ROOT_MODULES
 
 
-@pytest.mark.parametrize("module", ["holoflow.commands", "holoflow.commands.run", "holoflow.commands.status",
-                                    "holoflow.flow.batch", "holoflow.flow.scheduler", "holoflow.flow.status"])
+@pytest.mark.parametrize(
+    "module",
+    [
+        "holoflow.commands",
+        "holoflow.commands.run",
+        "holoflow.commands.status",
+        "holoflow.flow.batch",
+        "holoflow.flow.scheduler",
+        "holoflow.flow.status",
+    ],
+)
 def test_each_imports_alone_without_heavy_modules(module):
-    code = (f"import sys, {module}; heavy = {{'torch', 'numpy', 'viser'}} & {{m.split('.')[0] for m in sys.modules}}; "
-            f"assert not heavy, heavy")
+    code = (
+        f"import sys, {module}; heavy = {{'torch', 'numpy', 'viser'}} & {{m.split('.')[0] for m in sys.modules}}; "
+        f"assert not heavy, heavy"
+    )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
 
 
 def test_status_imports_nothing_heavy(project, capsys):
     project.run_json("p", capsys=capsys)
-    r = subprocess.run([sys.executable, "-X", "importtime", "-m", "holoflow", "status"], cwd=project.root,
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-X", "importtime", "-m", "holoflow", "status"],
+        cwd=project.root,
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0 and "fresh" in r.stdout, r.stderr
-    imported = {line.split("|")[-1].strip().split(".")[0] for line in r.stderr.splitlines()
-                if line.startswith("import time:")}
+    imported = {
+        line.split("|")[-1].strip().split(".")[0] for line in r.stderr.splitlines() if line.startswith("import time:")
+    }
     assert not imported & {"torch", "numpy", "viser", "subprocess", "threading"}

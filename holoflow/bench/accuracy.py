@@ -20,6 +20,7 @@ Writes a CSV (one row per point), a Pareto plot (time vs novel-view PSNR, time v
 paper profile's CPU time extrapolated from the measured per-stage scaling (``extrapolate``).
 ``--quick`` runs three points of the tiny profile (for tests).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,9 +36,21 @@ from pathlib import Path
 from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES, TRUTH_WAYS, stage_costs
 
 PROMPT = "a cozy wooden cabin at night"
-NEUTRAL = ["stylize.style=none", "detail.strength=0.0"]     # truth applies (the eval profile's choice)
-STAGES = ["base_pano", "stylize", "upscale", "detail", "tangent_depth", "metric_align", "point_cloud",
-          "pano_set", "pcd_set", "pre_opt", "inp_set", "transfer_opt"]
+NEUTRAL = ["stylize.style=none", "detail.strength=0.0"]  # truth applies (the eval profile's choice)
+STAGES = [
+    "base_pano",
+    "stylize",
+    "upscale",
+    "detail",
+    "tangent_depth",
+    "metric_align",
+    "point_cloud",
+    "pano_set",
+    "pcd_set",
+    "pre_opt",
+    "inp_set",
+    "transfer_opt",
+]
 SPLAT = ("pre_opt", "inp_set", "transfer_opt")
 STORE = Path("/tmp/holoflow-bench-accuracy/store")
 
@@ -56,9 +69,11 @@ class Point:
 def _iters(scale: float, profile: str = "eval") -> tuple[str, ...]:
     """Overrides scaling the profile's pre_opt and transfer_opt iteration counts by ``scale``."""
     p = resolved_params(profile, [])
-    return (f"pre_opt.pcd_iters={round(p['pre_opt']['pcd_iters'] * scale)}",
-            f"pre_opt.pano_iters={round(p['pre_opt']['pano_iters'] * scale)}",
-            f"transfer_opt.iters={round(p['transfer_opt']['iters'] * scale)}")
+    return (
+        f"pre_opt.pcd_iters={round(p['pre_opt']['pcd_iters'] * scale)}",
+        f"pre_opt.pano_iters={round(p['pre_opt']['pano_iters'] * scale)}",
+        f"transfer_opt.iters={round(p['transfer_opt']['iters'] * scale)}",
+    )
 
 
 def _pano(width: int) -> tuple[str, ...]:
@@ -97,10 +112,17 @@ def full_points() -> list[Point]:
 
 def quick_points() -> list[Point]:
     """Three tiny points: a base, fewer iterations (reuses every upstream stage), no densification."""
-    return [Point("base", "base", "tiny", tuple(NEUTRAL), "tiny"),
-            Point("iters-x0.5", "iterations", "x0.5", tuple(NEUTRAL) + _iters(0.5, "tiny"), "tiny"),
-            Point("no-densify", "densify", "off", tuple(NEUTRAL) + ("pre_opt.densify_from=1000000",
-                                                                   "transfer_opt.densify_from=1000000"), "tiny")]
+    return [
+        Point("base", "base", "tiny", tuple(NEUTRAL), "tiny"),
+        Point("iters-x0.5", "iterations", "x0.5", tuple(NEUTRAL) + _iters(0.5, "tiny"), "tiny"),
+        Point(
+            "no-densify",
+            "densify",
+            "off",
+            tuple(NEUTRAL) + ("pre_opt.densify_from=1000000", "transfer_opt.densify_from=1000000"),
+            "tiny",
+        ),
+    ]
 
 
 # -- one point ------------------------------------------------------------------------------------
@@ -113,8 +135,9 @@ def novel_intrinsics(size: int, fov_deg: float):
     return intrinsics_from_fov(fov_deg, size, size, dtype=torch.float32)
 
 
-def score_run(run_dir: Path, novel: int, novel_size: int, novel_fov: float, offset: float, seed: int,
-              backend: str, cache: dict) -> dict:
+def score_run(
+    run_dir: Path, novel: int, novel_size: int, novel_fov: float, offset: float, seed: int, backend: str, cache: dict
+) -> dict:
     """Accuracy of one run folder: depth truth metrics, then G0 / G1 PSNR / SSIM at the base cameras
     (vs the PANO set) and at ``novel`` seeded cameras (vs true renders, ``novel_size`` px square,
     ``novel_fov`` deg), scored by ``holoflow.evaluation``. Flat dict of floats."""
@@ -124,15 +147,22 @@ def score_run(run_dir: Path, novel: int, novel_size: int, novel_fov: float, offs
     depth = json.loads((run_dir / "metric_align" / "metric_align.json").read_text()).get("truth_metrics", {})
     scene, base = base_views(run_dir)
     K = novel_intrinsics(novel_size, novel_fov)
-    novel_vm = novel_cameras(scene, novel, offset, seed)         # [novel, 4, 4]
+    novel_vm = novel_cameras(scene, novel, offset, seed)  # [novel, 4, 4]
     novel_views = Views(novel_vm, K, true_views(scene, novel_vm, K, novel_size, novel_size, cache=cache))
     scores, _ = score_models(run_dir, {"base": base, "novel": novel_views}, backend)
     out = {"abs_rel": depth.get("abs_rel", math.nan), "delta1": depth.get("delta1", math.nan)}
     for tag, s in scores.items():
         t = tag.lower()
-        out.update({f"{t}_gaussians": s["gaussians"], f"{t}_base_psnr": s["base"]["psnr"],
-                    f"{t}_base_ssim": s["base"]["ssim"], f"{t}_novel_psnr": s["novel"]["psnr"],
-                    f"{t}_novel_ssim": s["novel"]["ssim"], f"{t}_novel_empty": s["novel"]["empty"]})
+        out.update(
+            {
+                f"{t}_gaussians": s["gaussians"],
+                f"{t}_base_psnr": s["base"]["psnr"],
+                f"{t}_base_ssim": s["base"]["ssim"],
+                f"{t}_novel_psnr": s["novel"]["psnr"],
+                f"{t}_novel_ssim": s["novel"]["ssim"],
+                f"{t}_novel_empty": s["novel"]["empty"],
+            }
+        )
     return out
 
 
@@ -148,16 +178,25 @@ def measure(point: Point, args, store_root: Path, cache: dict) -> tuple[dict, Pa
         run_dir, summary = run_pipeline(args.prompt, point.profile, list(point.sets) + args.sets, store_root)
         run_s = time.monotonic() - t0
     costs = stage_costs(Store(store_root), summary)
-    row = {"point": point.name, "axis": point.axis, "label": point.label, "profile": point.profile,
-           "sets": " ".join(point.sets), "ran": " ".join(n for n, c in costs.items() if c["how"] == "ran"),
-           "sweep_s": round(run_s, 2), "load1_before": round(load, 2), "load1_after": round(os.getloadavg()[0], 2)}
+    row = {
+        "point": point.name,
+        "axis": point.axis,
+        "label": point.label,
+        "profile": point.profile,
+        "sets": " ".join(point.sets),
+        "ran": " ".join(n for n, c in costs.items() if c["how"] == "ran"),
+        "sweep_s": round(run_s, 2),
+        "load1_before": round(load, 2),
+        "load1_after": round(os.getloadavg()[0], 2),
+    }
     row["total_wall_s"] = round(sum(c["wall_s"] for c in costs.values()), 2)
     row["total_cpu_s"] = round(sum(c["cpu_s"] for c in costs.values()), 2)
     for name in STAGES:
         row[f"{name}_s"] = costs.get(name, {}).get("wall_s", math.nan)
         row[f"{name}_cpu_s"] = costs.get(name, {}).get("cpu_s", math.nan)
-    row.update(score_run(run_dir, args.novel, args.novel_size, args.novel_fov, args.offset, args.seed,
-                         args.backend, cache))
+    row.update(
+        score_run(run_dir, args.novel, args.novel_size, args.novel_fov, args.offset, args.seed, args.backend, cache)
+    )
     return row, run_dir
 
 
@@ -177,7 +216,7 @@ class _flock:
 
     def __exit__(self, *exc):
         if self.fd is not None:
-            os.close(self.fd)                     # closing releases the lock
+            os.close(self.fd)  # closing releases the lock
 
 
 # -- extrapolation --------------------------------------------------------------------------------
@@ -194,7 +233,10 @@ def stage_drivers(params: dict[str, dict]) -> dict[str, dict[str, float]]:
     cams = p["pano_set"]["cameras"]
     depth_px = p["tangent_depth"]["width"] ** 2 / 2
     pixels = {n: p[n]["width"] * p[n]["height"] for n in ("base_pano", "stylize", "upscale", "detail")}
-    iters = {"pre_opt": p["pre_opt"]["pcd_iters"] + p["pre_opt"]["pano_iters"], "transfer_opt": p["transfer_opt"]["iters"]}
+    iters = {
+        "pre_opt": p["pre_opt"]["pcd_iters"] + p["pre_opt"]["pano_iters"],
+        "transfer_opt": p["transfer_opt"]["iters"],
+    }
     return {
         **{n: {"pixels": px} for n, px in pixels.items()},
         "tangent_depth": {"pixels": 20 * p["tangent_depth"]["face_size"] ** 2 + depth_px},
@@ -203,8 +245,10 @@ def stage_drivers(params: dict[str, dict]) -> dict[str, dict[str, float]]:
         "pano_set": {"view pixels": cams * view_px, "pano pixels": pixels["detail"]},
         "pcd_set": {"view pixels": 4 * cams * view_px, "P_s points": p["point_cloud"]["ps_width"] ** 2 / 2},
         "inp_set": {"view pixels": 4 * cams * view_px, "P_f points": pf},
-        **{n: {"iterations": it, "iterations x P_f points": it * pf, "iterations x view pixels": it * view_px}
-           for n, it in iters.items()},
+        **{
+            n: {"iterations": it, "iterations x P_f points": it * pf, "iterations x view pixels": it * view_px}
+            for n, it in iters.items()
+        },
     }
 
 
@@ -219,13 +263,16 @@ def fit_costs(drivers: list[dict[str, float]], seconds: list[float]) -> dict:
     keep = [i for i, t in enumerate(seconds) if math.isfinite(t)]
     names = list(drivers[0])
     varied = [n for n in names if len({drivers[i][n] for i in keep}) > 1]
-    A = np.array([[1.0] + [drivers[i][n] for n in varied] for i in keep])      # [points, 1 + K]
+    A = np.array([[1.0] + [drivers[i][n] for n in varied] for i in keep])  # [points, 1 + K]
     y = np.array([seconds[i] for i in keep])
-    scale = np.abs(A).max(0)                                                   # conditioning
+    scale = np.abs(A).max(0)  # conditioning
     sol, _ = nnls(A / scale, y)
     sol = sol / scale
-    return {"fixed": float(sol[0]), "coef": {n: float(c) for n, c in zip(varied, sol[1:])},
-            "unvaried": [n for n in names if n not in varied]}
+    return {
+        "fixed": float(sol[0]),
+        "coef": {n: float(c) for n, c in zip(varied, sol[1:])},
+        "unvaried": [n for n in names if n not in varied],
+    }
 
 
 def predict(fit: dict, drivers: dict[str, float]) -> float:
@@ -240,8 +287,11 @@ def extrapolate(rows: list[dict], drivers: list[dict], target: dict, key: str = 
     for name in STAGES:
         ys = [float(r[f"{name}_{key}"]) for r in rows]
         fit = fit_costs([d[name] for d in drivers], ys)
-        out[name] = {**fit, "seconds": predict(fit, target[name]),
-                     "max_measured_s": max((y for y in ys if math.isfinite(y)), default=math.nan)}
+        out[name] = {
+            **fit,
+            "seconds": predict(fit, target[name]),
+            "max_measured_s": max((y for y in ys if math.isfinite(y)), default=math.nan),
+        }
     return out
 
 
@@ -286,34 +336,49 @@ def plot(rows: list[dict], path: Path, machine: str, time_key: str, paper_s: flo
     fig, axes = plt.subplots(1, 2, figsize=(12, 5), dpi=100)
     axis_names = list(dict.fromkeys(r["axis"] for r in rows))
     colors = {a: plt.cm.tab10(i % 10) for i, a in enumerate(axis_names)}
-    for ax, key, better, ylabel in ((axes[0], "g1_novel_psnr", True, "G1 novel-view PSNR, dB (higher is better)"),
-                                    (axes[1], "abs_rel", False, "depth AbsRel vs truth (lower is better)")):
+    for ax, key, better, ylabel in (
+        (axes[0], "g1_novel_psnr", True, "G1 novel-view PSNR, dB (higher is better)"),
+        (axes[1], "abs_rel", False, "depth AbsRel vs truth (lower is better)"),
+    ):
         pts = [(float(r[time_key]), float(r[key])) for r in rows]
         for r, (x, y) in zip(rows, pts):
             star = r["axis"] in ("base", "profile")
-            ax.scatter([x], [y], color=colors[r["axis"]], s=90 if star else 30, marker="*" if star else "o",
-                       zorder=3)
-            if star or key != "abs_rel" or r["abs_rel"] != rows[0]["abs_rel"]:   # depth-neutral knobs overlap
+            ax.scatter([x], [y], color=colors[r["axis"]], s=90 if star else 30, marker="*" if star else "o", zorder=3)
+            if star or key != "abs_rel" or r["abs_rel"] != rows[0]["abs_rel"]:  # depth-neutral knobs overlap
                 ax.annotate(r["point"], (x, y), textcoords="offset points", xytext=(4, 3), fontsize=7)
         front = pareto(pts, better)
         ax.plot([pts[i][0] for i in front], [pts[i][1] for i in front], "k--", lw=1)
         ax.set_xscale("log")
         xs = [x for x, _ in pts]
-        if paper_s and paper_s > 20 * max(xs):          # far off the measured range: point at it
+        if paper_s and paper_s > 20 * max(xs):  # far off the measured range: point at it
             ax.set_xlim(min(xs) / 1.5, max(xs) * 3)
-            ax.annotate(f"paper sizes: ~{paper_s / 3600:.0f} CPU h here\n(extrapolated; accuracy not measured) ->",
-                        (1.0, 0.02), xycoords="axes fraction", fontsize=7, ha="right", color="grey")
+            ax.annotate(
+                f"paper sizes: ~{paper_s / 3600:.0f} CPU h here\n(extrapolated; accuracy not measured) ->",
+                (1.0, 0.02),
+                xycoords="axes fraction",
+                fontsize=7,
+                ha="right",
+                color="grey",
+            )
         elif paper_s:
             ax.axvline(paper_s, color="grey", lw=1, ls=":")
-            ax.annotate("paper sizes (time extrapolated,\naccuracy not measured)", (paper_s, 0.5),
-                        xycoords=("data", "axes fraction"), fontsize=7, ha="right", xytext=(-4, 0),
-                        textcoords="offset points")
+            ax.annotate(
+                "paper sizes (time extrapolated,\naccuracy not measured)",
+                (paper_s, 0.5),
+                xycoords=("data", "axes fraction"),
+                fontsize=7,
+                ha="right",
+                xytext=(-4, 0),
+                textcoords="offset points",
+            )
         what = "CPU" if "cpu" in time_key else "wall"
         ax.set_xlabel(f"{what} seconds of a fresh run (sum over the stages' run records; log scale)")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3, which="both")
-    handles = [plt.Line2D([], [], marker="*" if a in ("base", "profile") else "o", ls="", color=colors[a], label=a)
-               for a in axis_names]
+    handles = [
+        plt.Line2D([], [], marker="*" if a in ("base", "profile") else "o", ls="", color=colors[a], label=a)
+        for a in axis_names
+    ]
     axes[0].legend(handles=handles + [plt.Line2D([], [], ls="--", color="k", label="Pareto front")], fontsize=7)
     fig.suptitle(f"holoflow bench accuracy, '{rows[0]['prompt']}', machine: {machine}", fontsize=9)
     fig.tight_layout()
@@ -362,29 +427,45 @@ def _f(x, digits: int = 2) -> str:
 
 def tables(rows: list[dict], paper: dict | None, machine: str) -> str:
     """Markdown: the points (time and accuracy), CPU seconds per stage, and the paper extrapolation."""
-    out = [f"Machine: {machine}. Prompt: *{rows[0]['prompt']}*. Times are the stages' run records "
-           "(CPU = user + system seconds of the step process; wall under the load shown).", "",
-           "| point | knob | value | fresh run CPU s | wall s | load | AbsRel | delta1 | G0 base PSNR | "
-           "G1 base PSNR | G1 base SSIM | G0 novel PSNR | G1 novel PSNR | G1 novel SSIM | G1 Gaussians | recomputed |",
-           "|" + "---|" * 16]
+    out = [
+        f"Machine: {machine}. Prompt: *{rows[0]['prompt']}*. Times are the stages' run records "
+        "(CPU = user + system seconds of the step process; wall under the load shown).",
+        "",
+        "| point | knob | value | fresh run CPU s | wall s | load | AbsRel | delta1 | G0 base PSNR | "
+        "G1 base PSNR | G1 base SSIM | G0 novel PSNR | G1 novel PSNR | G1 novel SSIM | G1 Gaussians | recomputed |",
+        "|" + "---|" * 16,
+    ]
     for r in rows:
-        out.append(f"| {r['point']} | {r['axis']} | {r['label']} | {_f(r['total_cpu_s'], 1)} | "
-                   f"{_f(r['total_wall_s'], 1)} | {_f(r['load1_before'], 1)} | {_f(r['abs_rel'], 4)} | "
-                   f"{_f(r['delta1'], 4)} | {_f(r['g0_base_psnr'])} | {_f(r['g1_base_psnr'])} | "
-                   f"{_f(r['g1_base_ssim'], 4)} | {_f(r['g0_novel_psnr'])} | {_f(r['g1_novel_psnr'])} | {_f(r['g1_novel_ssim'], 4)} | "
-                   f"{r['g1_gaussians']} | {r['ran'] or '(all cached)'} |")
-    out += ["", "CPU seconds per stage (from the run records):", "",
-            "| point | " + " | ".join(STAGES) + " |", "|" + "---|" * (len(STAGES) + 1)]
+        out.append(
+            f"| {r['point']} | {r['axis']} | {r['label']} | {_f(r['total_cpu_s'], 1)} | "
+            f"{_f(r['total_wall_s'], 1)} | {_f(r['load1_before'], 1)} | {_f(r['abs_rel'], 4)} | "
+            f"{_f(r['delta1'], 4)} | {_f(r['g0_base_psnr'])} | {_f(r['g1_base_psnr'])} | "
+            f"{_f(r['g1_base_ssim'], 4)} | {_f(r['g0_novel_psnr'])} | {_f(r['g1_novel_psnr'])} | {_f(r['g1_novel_ssim'], 4)} | "
+            f"{r['g1_gaussians']} | {r['ran'] or '(all cached)'} |"
+        )
+    out += [
+        "",
+        "CPU seconds per stage (from the run records):",
+        "",
+        "| point | " + " | ".join(STAGES) + " |",
+        "|" + "---|" * (len(STAGES) + 1),
+    ]
     for r in rows:
-        out.append(f"| {r['point']} | " + " | ".join(_f(r[f'{n}_cpu_s'], 1) for n in STAGES) + " |")
+        out.append(f"| {r['point']} | " + " | ".join(_f(r[f"{n}_cpu_s"], 1) for n in STAGES) + " |")
     if paper:
-        out += ["", f"Paper sizes on this machine, extrapolated (total {_f(paper['total_s'] / 3600, 1)} CPU hours):",
-                "", "| stage | fixed s | per-unit costs (s) | drivers that never varied | measured max s | "
-                "extrapolated s |", "|---|---|---|---|---|---|"]
+        out += [
+            "",
+            f"Paper sizes on this machine, extrapolated (total {_f(paper['total_s'] / 3600, 1)} CPU hours):",
+            "",
+            "| stage | fixed s | per-unit costs (s) | drivers that never varied | measured max s | extrapolated s |",
+            "|---|---|---|---|---|---|",
+        ]
         for n, v in paper["stages"].items():
             coef = ", ".join(f"{k}: {c:.3g}" for k, c in v["coef"].items()) or "-"
-            out.append(f"| {n} | {_f(v['fixed'], 1)} | {coef} | {', '.join(v['unvaried']) or '-'} | "
-                       f"{_f(v['max_measured_s'], 1)} | {_f(v['seconds'], 0)} |")
+            out.append(
+                f"| {n} | {_f(v['fixed'], 1)} | {coef} | {', '.join(v['unvaried']) or '-'} | "
+                f"{_f(v['max_measured_s'], 1)} | {_f(v['seconds'], 0)} |"
+            )
     return "\n".join(out) + "\n"
 
 
@@ -412,25 +493,29 @@ def stage_pictures(run_dir: Path, folder: Path, prefix: str = "accuracy-base") -
         return colour(np.stack([chans[c] for c in "RGB"], -1)), chans
 
     folder.mkdir(parents=True, exist_ok=True)
-    depth = [colour_map(ch(run_dir / "tangent_depth" / "disparity.exr", "Y")),
-             depth_map(ch(run_dir / "metric_align" / "depth.exr", "Z")),
-             depth_map(ch(run_dir / "base_pano" / "pano.exr", "Z"))]
+    depth = [
+        colour_map(ch(run_dir / "tangent_depth" / "disparity.exr", "Y")),
+        depth_map(ch(run_dir / "metric_align" / "depth.exr", "Z")),
+        depth_map(ch(run_dir / "base_pano" / "pano.exr", "Z")),
+    ]
     width = min(d.shape[1] for d in depth)
     gap = np.full((4, width, 3), 255, np.uint8)
     rows = [fit_width(d, width) for d in depth]
     out = [save("depth", np.concatenate([rows[0], gap, rows[1], gap, rows[2]], 0))]
     faces = sorted((run_dir / "tangent_depth" / "faces").glob("face_*.exr"))
     out.append(save("faces", mosaic([colour_map(ch(f, "aligned.Y")) for f in faces], 10, 96)))
-    pictures = [clouds.render_zbuffer(*clouds.read_cloud(run_dir / stage / file), size=(480, 300))
-                for stage, file in (("point_cloud", "pf.ply"), ("transfer_opt", "scene.ply"))]
+    pictures = [
+        clouds.render_zbuffer(*clouds.read_cloud(run_dir / stage / file), size=(480, 300))
+        for stage, file in (("point_cloud", "pf.ply"), ("transfer_opt", "scene.ply"))
+    ]
     out.append(save("clouds", np.concatenate([pictures[0], np.full((300, 4, 3), 255, np.uint8), pictures[1]], 1)))
     tiles = [rgb(run_dir / "pano_set" / "views" / f"{i:03d}.exr")[0] for i in range(6)]
-    supp = [f"{b:03d}_{k}" for b in (0, 1) for k in range(4)][:6]            # 4 per base camera
+    supp = [f"{b:03d}_{k}" for b in (0, 1) for k in range(4)][:6]  # 4 per base camera
     for sub in ("pcd_set/views", "inp_set/renders", "inp_set/views"):
         for name in supp:
             img, chans = rgb(run_dir / sub / f"{name}.exr")
             if sub == "pcd_set/views":
-                img[chans["A"] < 0.5] = (255, 0, 255)                              # missing pixels
+                img[chans["A"] < 0.5] = (255, 0, 255)  # missing pixels
             tiles.append(img)
     return out + [save("views", mosaic(tiles, 6, 96))]
 
@@ -440,8 +525,9 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(prog="holoflow bench accuracy", description=__doc__.split("\n\n")[0])
     ap.add_argument("--prompt", default=PROMPT, help="procedural scene")
-    ap.add_argument("--store", type=Path, default=STORE,
-                    help="shared store of the sweep (the same store again resumes / reuses)")
+    ap.add_argument(
+        "--store", type=Path, default=STORE, help="shared store of the sweep (the same store again resumes / reuses)"
+    )
     ap.add_argument("--points", default="all", help="comma list of point names (default all)")
     ap.add_argument("--set", dest="sets", action="append", default=[], help="stage.param=value for every point")
     ap.add_argument("--novel", type=int, default=8, help="novel cameras")
@@ -450,40 +536,71 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--offset", type=float, default=0.3, help="novel eye offset, max fraction of the free distance")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
-    ap.add_argument("--lock", type=Path, default=None,
-                    help="flock held while each point's pipeline runs (e.g. /tmp/holoflow-bench.lock)")
-    ap.add_argument("--time", dest="time_key", default="total_cpu_s", choices=["total_cpu_s", "total_wall_s"],
-                    help="time axis of the plot (CPU seconds are robust to a shared machine's load)")
+    ap.add_argument(
+        "--lock",
+        type=Path,
+        default=None,
+        help="flock held while each point's pipeline runs (e.g. /tmp/holoflow-bench.lock)",
+    )
+    ap.add_argument(
+        "--time",
+        dest="time_key",
+        default="total_cpu_s",
+        choices=["total_cpu_s", "total_wall_s"],
+        help="time axis of the plot (CPU seconds are robust to a shared machine's load)",
+    )
     ap.add_argument("--csv", type=Path, default=Path("docs/bench-accuracy.csv"))
     ap.add_argument("--plot", type=Path, default=Path("docs/images/accuracy-pareto.png"))
     ap.add_argument("--json", type=Path, default=None, help="also write rows + paper extrapolation as JSON")
     ap.add_argument("--tables", type=Path, default=None, help="also write the results as markdown tables")
-    ap.add_argument("--pictures", type=Path, default=None,
-                    help="folder for pictures of the first point's artifacts (accuracy-base-*.png)")
+    ap.add_argument(
+        "--pictures",
+        type=Path,
+        default=None,
+        help="folder for pictures of the first point's artifacts (accuracy-base-*.png)",
+    )
     ap.add_argument("--quick", action="store_true", help="three tiny points (tests)")
-    ap.add_argument("--profiles", default=None,
-                    help="comma list of profiles (e.g. preview,quality,paper): instead of the knob sweep, run each "
-                         "on --scenes and --photos and score it at the viewing size (holoflow.bench.profiles); "
-                         "a profile the pipeline lacks or that needs a GPU / weights absent here is skipped")
+    ap.add_argument(
+        "--profiles",
+        default=None,
+        help="comma list of profiles (e.g. preview,quality,paper): instead of the knob sweep, run each "
+        "on --scenes and --photos and score it at the viewing size (holoflow.bench.profiles); "
+        "a profile the pipeline lacks or that needs a GPU / weights absent here is skipped",
+    )
     ap.add_argument("--scenes", default=";".join(SCENES), help="--profiles: procedural prompts, ';'-separated")
-    ap.add_argument("--photos", default=str(PHOTOS),
-                    help="--profiles: folder of 360 photos, each run as --use base_pano=PHOTO ('' = none)")
+    ap.add_argument(
+        "--photos",
+        default=str(PHOTOS),
+        help="--profiles: folder of 360 photos, each run as --use base_pano=PHOTO ('' = none)",
+    )
     ap.add_argument("--photo-prompt", default=PHOTO_PROMPT, help="--profiles: the prompt of the photo runs")
-    ap.add_argument("--truth", default="",
-                    help="--profiles: a truth set folder (docs/truth-sets.md; e.g. "
-                         "../shared/data/truth/grey_white_room) run --truth-ways ways and scored per ring (skipped "
-                         "with a note when absent)")
-    ap.add_argument("--scene-truth", action="store_true",
-                    help="--profiles: also score each procedural scene against a truth set ray cast from it "
-                         "(512 px views on rings 0 / 0.25 / 0.5 / 1 m, kept in the store's truth/ folder)")
-    ap.add_argument("--truth-ways", default=",".join(TRUTH_WAYS),
-                    help=f"--profiles: comma list of {', '.join(TRUTH_WAYS)}: exact depth, the simulated network's "
-                         "depth, RGB only")
+    ap.add_argument(
+        "--truth",
+        default="",
+        help="--profiles: a truth set folder (docs/truth-sets.md; e.g. "
+        "../shared/data/truth/grey_white_room) run --truth-ways ways and scored per ring (skipped "
+        "with a note when absent)",
+    )
+    ap.add_argument(
+        "--scene-truth",
+        action="store_true",
+        help="--profiles: also score each procedural scene against a truth set ray cast from it "
+        "(512 px views on rings 0 / 0.25 / 0.5 / 1 m, kept in the store's truth/ folder)",
+    )
+    ap.add_argument(
+        "--truth-ways",
+        default=",".join(TRUTH_WAYS),
+        help=f"--profiles: comma list of {', '.join(TRUTH_WAYS)}: exact depth, the simulated network's depth, RGB only",
+    )
     ap.add_argument("--size", type=int, default=512, help="--profiles: viewing size, px")
     ap.add_argument("--fov", type=float, default=47.43, help="--profiles: viewing field of view, deg")
     ap.add_argument("--nr-cameras", type=int, default=12, help="--profiles: cameras NIQE / BRISQUE are taken at")
-    ap.add_argument("--doc", type=Path, default=None,
-                    help="--profiles: markdown file whose generated block (between markers) gets the table")
+    ap.add_argument(
+        "--doc",
+        type=Path,
+        default=None,
+        help="--profiles: markdown file whose generated block (between markers) gets the table",
+    )
     args = ap.parse_args(argv)
     if args.profiles:
         from holoflow.bench import profiles
@@ -499,8 +616,10 @@ def main(argv: list[str] | None = None) -> int:
         want = args.points.split(",")
         unknown = sorted(set(want) - {p.name for p in points})
         if unknown:
-            print(f"holoflow bench accuracy: unknown point(s) {unknown}; choose from "
-                  f"{[p.name for p in points]}", file=sys.stderr)
+            print(
+                f"holoflow bench accuracy: unknown point(s) {unknown}; choose from {[p.name for p in points]}",
+                file=sys.stderr,
+            )
             return 2
         points = [p for p in points if p.name in want]
 
@@ -512,20 +631,25 @@ def main(argv: list[str] | None = None) -> int:
             stage_pictures(run_dir, args.pictures)
         row["prompt"] = args.prompt
         rows.append(row)
-        print(f"accuracy: {p.name:12s} ran [{row['ran']}] fresh run {row['total_cpu_s']:.1f} CPU-s "
-              f"({row['total_wall_s']:.1f} s wall), AbsRel {row['abs_rel']:.4f}, G1 novel "
-              f"{row['g1_novel_psnr']:.2f} dB, base {row['g1_base_psnr']:.2f} dB (load {row['load1_before']})",
-              file=sys.stderr, flush=True)
+        print(
+            f"accuracy: {p.name:12s} ran [{row['ran']}] fresh run {row['total_cpu_s']:.1f} CPU-s "
+            f"({row['total_wall_s']:.1f} s wall), AbsRel {row['abs_rel']:.4f}, G1 novel "
+            f"{row['g1_novel_psnr']:.2f} dB, base {row['g1_base_psnr']:.2f} dB (load {row['load1_before']})",
+            file=sys.stderr,
+            flush=True,
+        )
         # a stopped sweep still leaves its rows and plot
         write_csv(args.csv, rows)
-        paper = paper_estimate(rows, points[:i + 1], args.time_key[6:]) if len(rows) > 1 else None
+        paper = paper_estimate(rows, points[: i + 1], args.time_key[6:]) if len(rows) > 1 else None
         plot(rows, args.plot, mach, args.time_key, paper["total_s"] if paper else None)
         plot_stages(rows, args.plot.with_name(args.plot.stem + "-stages.png"), mach)
         if args.tables:
             args.tables.write_text(tables(rows, paper, mach))
         if args.json:
             args.json.write_text(json.dumps({"machine": mach, "rows": rows, "paper": paper}, indent=1, default=str))
-    print(f"accuracy: {len(rows)} points; CSV {args.csv}, plot {args.plot}"
-          + (f"; paper sizes extrapolated to {paper['total_s']:.0f} s on this machine" if paper else ""),
-          file=sys.stderr)
+    print(
+        f"accuracy: {len(rows)} points; CSV {args.csv}, plot {args.plot}"
+        + (f"; paper sizes extrapolated to {paper['total_s']:.0f} s on this machine" if paper else ""),
+        file=sys.stderr,
+    )
     return 0

@@ -8,6 +8,7 @@ Table 2 + plot: accuracy against wall time over face size x grid size (2 scenes)
 Writes docs/bench-depth.md and docs/images/depth_sweep.png. Measured on this machine; times include the
 engine, overlaps, solve and blending of tangent_depth plus metric_align.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -18,8 +19,7 @@ import numpy as np
 
 from holoflow.evaluation.machine import load, machine
 
-INDOOR = ("a cozy living room with a sofa and a lamp", "a bedroom with a wooden bed",
-          "a modern kitchen with a table")
+INDOOR = ("a cozy living room with a sofa and a lamp", "a bedroom with a wooden bed", "a modern kitchen with a table")
 OUTDOOR = ("a sunny meadow with trees", "a beach by the sea", "a quiet village street with houses")
 METHODS = (("a", "median"), ("b", "affine"), ("c", "grid"))
 
@@ -40,10 +40,12 @@ def run_once(rgb, truth, method, face_size, grid, seed, n_faces=6):
     from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 
     t0 = time.perf_counter()
-    td = pd.estimate_disparity(rgb, truth, "simulated", TangentDepthParams(face_size=face_size, align=method,
-                                                                           grid=grid), seed)
-    md = pd.metric_from_disparity(td.disparity, rgb, truth, "simulated",
-                                  MetricAlignParams(faces=n_faces, face_size=face_size), seed)
+    td = pd.estimate_disparity(
+        rgb, truth, "simulated", TangentDepthParams(face_size=face_size, align=method, grid=grid), seed
+    )
+    md = pd.metric_from_disparity(
+        td.disparity, rgb, truth, "simulated", MetricAlignParams(faces=n_faces, face_size=face_size), seed
+    )
     seconds = time.perf_counter() - t0
     return pd.score(md.depth, truth), pd.oracle_metrics(td.disparity, truth), seconds
 
@@ -74,25 +76,28 @@ def main(argv: list[str]) -> int:
         for label, method in METHODS:
             try:
                 m, o, sec = run_once(rgb, truth, method, args.face_size, grid, args.seed)
-            except ValueError as exc:              # a method that breaks down on a scene is a result too
-                rows.append(f"| {prompt} | {kind} | ({label}) {method} | fails: {str(exc).split(':')[0]} "
-                            "| | | | | | |")
+            except ValueError as exc:  # a method that breaks down on a scene is a result too
+                rows.append(f"| {prompt} | {kind} | ({label}) {method} | fails: {str(exc).split(':')[0]} | | | | | | |")
                 print(rows[-1], flush=True)
                 continue
             summary[method].append(m)
-            rows.append(f"| {prompt} | {kind} | ({label}) {method} | {m['abs_rel']:.4f} | {m['rmse']:.3f} | "
-                        f"{m['delta1']:.4f} | {m['coverage']:.4f} | {m['sky_false']:.4f} | {o['abs_rel']:.4f} | "
-                        f"{sec:.1f} |")
+            rows.append(
+                f"| {prompt} | {kind} | ({label}) {method} | {m['abs_rel']:.4f} | {m['rmse']:.3f} | "
+                f"{m['delta1']:.4f} | {m['coverage']:.4f} | {m['sky_false']:.4f} | {o['abs_rel']:.4f} | "
+                f"{sec:.1f} |"
+            )
             print(rows[-1], flush=True)
     mean_rows = []
     for label, method in METHODS:
         ms = summary[method]
         if not ms:
             continue
-        mean_rows.append(f"| **mean of {len(ms)}** | | ({label}) {method} | {np.mean([m['abs_rel'] for m in ms]):.4f} | "
-                         f"{np.mean([m['rmse'] for m in ms]):.3f} | {np.mean([m['delta1'] for m in ms]):.4f} | "
-                         f"{np.mean([m['coverage'] for m in ms]):.4f} | {np.mean([m['sky_false'] for m in ms]):.4f}"
-                         " | | |")
+        mean_rows.append(
+            f"| **mean of {len(ms)}** | | ({label}) {method} | {np.mean([m['abs_rel'] for m in ms]):.4f} | "
+            f"{np.mean([m['rmse'] for m in ms]):.3f} | {np.mean([m['delta1'] for m in ms]):.4f} | "
+            f"{np.mean([m['coverage'] for m in ms]):.4f} | {np.mean([m['sky_false'] for m in ms]):.4f}"
+            " | | |"
+        )
 
     sweep_rows, points = [], []
     if not args.skip_sweep:
@@ -111,25 +116,39 @@ def main(argv: list[str]) -> int:
         _plot(points, out / "images" / "depth_sweep.png")
 
     text = [
-        "# Depth bench (`holoflow bench depth`)", "",
-        f"Machine: {machine()}; load average {load()} at the end (other jobs shared the CPU: times are upper "
-        "bounds).",
+        "# Depth bench (`holoflow bench depth`)",
+        "",
+        f"Machine: {machine()}; load average {load()} at the end (other jobs shared the CPU: times are upper bounds).",
         f"Panorama {args.width}x{args.width // 2}, procedural scenes (seed {args.seed}), simulated relative "
         f"and metric engines (docs/depth.md), face size {args.face_size}, grid {grid[0]}x{grid[1]}, "
-        "6 metric faces, defaults of pipeline.yaml otherwise.", "",
+        "6 metric faces, defaults of pipeline.yaml otherwise.",
+        "",
         "AbsRel, RMSE (m), delta1 over non-sky truth pixels; coverage = fraction of them predicted finite; "
         "sky_false = fraction of truth-sky pixels predicted finite; oracle = AbsRel after the best global "
-        "scale + offset fitted on the truth (alignment alone); s = wall seconds of both stages.", "",
+        "scale + offset fitted on the truth (alignment alone); s = wall seconds of both stages.",
+        "",
         "| scene | kind | alignment | AbsRel | RMSE | delta1 | coverage | sky_false | oracle AbsRel | s |",
-        "|---|---|---|---|---|---|---|---|---|---|", *rows, *mean_rows, "",
+        "|---|---|---|---|---|---|---|---|---|---|",
+        *rows,
+        *mean_rows,
+        "",
         "A method that 'fails' raised the stages' own error on that scene (e.g. a metric fit with a "
-        "non-positive scale) and is left out of its mean, whose n says how many scenes it covers.", "",
-        "Reference: 360MonoDepth + Depth Anything on Replica360-4K (paper, other input): AbsRel 0.116, "
-        "delta1 0.894.", ""]
+        "non-positive scale) and is left out of its mean, whose n says how many scenes it covers.",
+        "",
+        "Reference: 360MonoDepth + Depth Anything on Replica360-4K (paper, other input): AbsRel 0.116, delta1 0.894.",
+        "",
+    ]
     if sweep_rows:
-        text += ["## Accuracy against time (grid alignment; mean of 1 indoor + 1 outdoor scene)", "",
-                 "| face size | grid | AbsRel | delta1 | s |", "|---|---|---|---|---|", *sweep_rows, "",
-                 "![accuracy vs time](images/depth_sweep.png)", ""]
+        text += [
+            "## Accuracy against time (grid alignment; mean of 1 indoor + 1 outdoor scene)",
+            "",
+            "| face size | grid | AbsRel | delta1 | s |",
+            "|---|---|---|---|---|",
+            *sweep_rows,
+            "",
+            "![accuracy vs time](images/depth_sweep.png)",
+            "",
+        ]
     (out / "bench-depth.md").write_text("\n".join(text))
     print(f"wrote {out / 'bench-depth.md'}")
     return 0

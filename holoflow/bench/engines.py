@@ -8,6 +8,7 @@ UNet + VAE + CLIP-L, ControlNet, RRDBNet x4plus, big-lama, Depth Anything large,
 give the engines' real cost without downloading anything. Each time is one engine call, model
 loading from a local folder included, as a stage pays it. Writes a markdown table naming the machine.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,16 +20,26 @@ import numpy as np
 
 # (engine, what, paper sizes, tiny sizes)
 CASES = {
-    "diffusion360": ("base_pano 1024x512, 30 steps", dict(width=1024, height=512, steps=30),
-                     dict(width=64, height=32, steps=2)),
-    "controlnet_lineart": ("stylize 1536x768, 20 steps", dict(width=1536, height=768, steps=20),
-                           dict(width=64, height=32, steps=2)),
-    "realesrgan": ("upscale x4 1536x768 -> 6144x3072, tile 512", dict(src=(768, 1536), width=6144, height=3072,
-                                                                         tile=512),
-                   dict(src=(32, 64), width=256, height=128, tile=64)),
-    "controlnet_tile": ("detail 6144x3072, tiles 512/64, 20 steps x 0.5", dict(width=6144, height=3072, tile=512,
-                                                                               overlap=64, steps=20),
-                        dict(width=64, height=32, tile=32, overlap=8, steps=2)),
+    "diffusion360": (
+        "base_pano 1024x512, 30 steps",
+        dict(width=1024, height=512, steps=30),
+        dict(width=64, height=32, steps=2),
+    ),
+    "controlnet_lineart": (
+        "stylize 1536x768, 20 steps",
+        dict(width=1536, height=768, steps=20),
+        dict(width=64, height=32, steps=2),
+    ),
+    "realesrgan": (
+        "upscale x4 1536x768 -> 6144x3072, tile 512",
+        dict(src=(768, 1536), width=6144, height=3072, tile=512),
+        dict(src=(32, 64), width=256, height=128, tile=64),
+    ),
+    "controlnet_tile": (
+        "detail 6144x3072, tiles 512/64, 20 steps x 0.5",
+        dict(width=6144, height=3072, tile=512, overlap=64, steps=20),
+        dict(width=64, height=32, tile=32, overlap=8, steps=2),
+    ),
     "depth_anything": ("20 tangent faces 512x512", dict(n=20, side=512), dict(n=4, side=32)),
     "zoedepth": ("6 tangent faces 512x512 (+ flip)", dict(n=6, side=512), dict(n=2, side=32)),
     "lama": ("152 views 512x512, 15% holes", dict(n=152, side=512), dict(n=4, side=32)),
@@ -63,28 +74,59 @@ def run_case(name: str, size: dict, folder: Path, full: bool, device: str) -> fl
     if name == "diffusion360":
         from holoflow.networks.diffusion360 import generate_pano
 
-        call = lambda: generate_pano("a cozy wooden cabin", size["width"], size["height"], steps=size["steps"],  # noqa
-                                     model=str(sd), device=device)
+        call = lambda: generate_pano(
+            "a cozy wooden cabin",
+            size["width"],
+            size["height"],
+            steps=size["steps"],  # noqa
+            model=str(sd),
+            device=device,
+        )
     elif name == "controlnet_lineart":
         from holoflow.networks.controlnet_lineart import stylize
 
         pano = _image(size["height"], size["width"], 0)
-        call = lambda: stylize(pano, pano[..., 0], "watercolor", size["width"], size["height"],  # noqa
-                               steps=size["steps"], model=str(sd), controlnet=cnet, device=device)
+        call = lambda: stylize(
+            pano,
+            pano[..., 0],
+            "watercolor",
+            size["width"],
+            size["height"],  # noqa
+            steps=size["steps"],
+            model=str(sd),
+            controlnet=cnet,
+            device=device,
+        )
     elif name == "realesrgan":
         from holoflow.networks.realesrgan import upscale
 
         weights = rm.save_rrdbnet(folder / "x4.pth", 4, full=full)
         pano = _image(*size["src"], 0)
-        call = lambda: upscale(pano, size["width"], size["height"], model=str(weights), tile=size["tile"],  # noqa
-                               device=device)
+        call = lambda: upscale(
+            pano,
+            size["width"],
+            size["height"],
+            model=str(weights),
+            tile=size["tile"],  # noqa
+            device=device,
+        )
     elif name == "controlnet_tile":
         from holoflow.networks.controlnet_tile import refine
 
         pano = _image(size["height"], size["width"], 0)
-        call = lambda: refine(pano, "detailed", size["width"], size["height"], strength=0.5, tile=size["tile"],  # noqa
-                              overlap=size["overlap"], steps=size["steps"], model=str(sd), controlnet=cnet,
-                              device=device)
+        call = lambda: refine(
+            pano,
+            "detailed",
+            size["width"],
+            size["height"],
+            strength=0.5,
+            tile=size["tile"],  # noqa
+            overlap=size["overlap"],
+            steps=size["steps"],
+            model=str(sd),
+            controlnet=cnet,
+            device=device,
+        )
     elif name == "depth_anything":
         from holoflow.networks.depth_anything import relative_disparity
 
@@ -127,11 +169,18 @@ def main(argv: list[str] | None = None) -> int:
             seconds = run_case(name, paper if args.full else tiny, Path(tmp), args.full, args.device)
             rows.append(f"| {name} | {what if args.full else 'tiny model, test size'} | {seconds:.1f} |")
             print(rows[-1], flush=True)
-    table = "\n".join([
-        f"Engines timed with random {'full-size' if args.full else 'tiny'} models on {args.device}: "
-        f"{_machine(args.device)}.",
-        "One call each, model loading from local disk included.", "",
-        "| engine | work | seconds |", "|---|---|---|", *rows, ""])
+    table = "\n".join(
+        [
+            f"Engines timed with random {'full-size' if args.full else 'tiny'} models on {args.device}: "
+            f"{_machine(args.device)}.",
+            "One call each, model loading from local disk included.",
+            "",
+            "| engine | work | seconds |",
+            "|---|---|---|",
+            *rows,
+            "",
+        ]
+    )
     if args.out:
         Path(args.out).write_text(table)
     print(table)

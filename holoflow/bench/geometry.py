@@ -15,6 +15,7 @@ new direction). One table per ``--threads`` count (default 1 and 2), the same co
 (py360convert's scipy backend is single-threaded at any count). Writes docs/bench-geometry.md with the
 machine and the load average before and after each table.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,12 +31,15 @@ from pathlib import Path
 from holoflow.evaluation.machine import machine
 
 VIEWS = {  # name -> (lon deg, lat deg) of the optical axis (py360convert's u_deg, v_deg)
-    "front": (0.0, 0.0), "seam": (180.0, 0.0), "north pole": (0.0, 90.0), "south pole": (0.0, -90.0),
+    "front": (0.0, 0.0),
+    "seam": (180.0, 0.0),
+    "north pole": (0.0, 90.0),
+    "south pole": (0.0, -90.0),
     "oblique": (45.0, 30.0),
 }
 CUBE = {"F": (0, 0), "R": (90, 0), "B": (180, 0), "L": (-90, 0), "U": (0, 90), "D": (0, -90)}
 
-_CHILD = r'''
+_CHILD = r"""
 import json, sys, time
 import numpy as np
 if sys.argv[2] == "scipy":
@@ -65,7 +69,7 @@ np.save(f"{sys.argv[1]}/{sys.argv[2]}_cube.npy", cube); np.save(f"{sys.argv[1]}/
 out["cube"] = t
 out["version"] = py360convert.__version__ if hasattr(py360convert, "__version__") else "?"
 print(json.dumps(out))
-'''
+"""
 
 
 def field(d):
@@ -73,9 +77,14 @@ def field(d):
     import torch
 
     x, y, z = d.unbind(-1)
-    return torch.stack([0.5 + 0.3 * torch.sin(6 * x + 2 * z) * torch.cos(5 * y),
-                        0.5 + 0.25 * torch.sin(4 * y + 3 * x) + 0.15 * z,
-                        0.5 + 0.2 * torch.cos(7 * z - 2 * y) + 0.2 * x * y], -1)
+    return torch.stack(
+        [
+            0.5 + 0.3 * torch.sin(6 * x + 2 * z) * torch.cos(5 * y),
+            0.5 + 0.25 * torch.sin(4 * y + 3 * x) + 0.15 * z,
+            0.5 + 0.2 * torch.cos(7 * z - 2 * y) + 0.2 * x * y,
+        ],
+        -1,
+    )
 
 
 def _venv(given: str | None, cv2: bool, tmp: Path) -> Path:
@@ -101,10 +110,15 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--face", type=int, default=256, help="cube face side, pixels")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--venv", help="existing virtual environment with py360convert (default: a new temporary one)")
-    ap.add_argument("--cv2", action="store_true", help="also install opencv into the venv and time py360convert's cv2 backend")
+    ap.add_argument(
+        "--cv2", action="store_true", help="also install opencv into the venv and time py360convert's cv2 backend"
+    )
     ap.add_argument("--device", default="cpu")
-    ap.add_argument("--threads", default="1,2",
-                    help="comma-separated CPU thread counts; one table each, the same count on both sides")
+    ap.add_argument(
+        "--threads",
+        default="1,2",
+        help="comma-separated CPU thread counts; one table each, the same count on both sides",
+    )
     ap.add_argument("--out", default="docs/bench-geometry.md")
     args = ap.parse_args(argv)
 
@@ -123,8 +137,9 @@ def main(argv: list[str]) -> int:
     with tempfile.TemporaryDirectory(prefix="holoflow-bench-geometry-") as tmp_s:
         tmp = Path(tmp_s)
         np.save(tmp / "pano.npy", pano.cpu().numpy())
-        (tmp / "cfg.json").write_text(json.dumps({"views": VIEWS, "fov": args.fov, "size": args.size,
-                                                  "face": args.face, "repeat": args.repeat}))
+        (tmp / "cfg.json").write_text(
+            json.dumps({"views": VIEWS, "fov": args.fov, "size": args.size, "face": args.face, "repeat": args.repeat})
+        )
         python = _venv(args.venv, args.cv2, tmp)
         has_cv2 = subprocess.run([str(python), "-c", "import cv2"], capture_output=True).returncode == 0
         backends = ["scipy"] + (["cv2"] if has_cv2 else [])
@@ -137,8 +152,10 @@ def main(argv: list[str]) -> int:
             return float(err.max()), float(err.mean())
 
         def ours(axes: list[tuple[float, float]], size: int, fov: float, mode: str):
-            dirs = lonlat_to_direction(torch.tensor([math.radians(a[0]) for a in axes], dtype=torch.float64),
-                                       torch.tensor([math.radians(a[1]) for a in axes], dtype=torch.float64))
+            dirs = lonlat_to_direction(
+                torch.tensor([math.radians(a[0]) for a in axes], dtype=torch.float64),
+                torch.tensor([math.radians(a[1]) for a in axes], dtype=torch.float64),
+            )
             V = look_at(torch.zeros_like(dirs), dirs).float().to(dev)
             K = intrinsics_from_fov(fov, size, size, dtype=torch.float32).to(dev).expand(len(axes), 3, 3)
             src = pano.permute(2, 0, 1).contiguous()
@@ -162,8 +179,13 @@ def main(argv: list[str]) -> int:
             theirs = {}
             for b in backends:
                 env = {**os.environ, "OMP_NUM_THREADS": str(threads), "OPENBLAS_NUM_THREADS": str(threads)}
-                res = subprocess.run([str(python), "-c", _CHILD, str(tmp), b, str(threads)], capture_output=True,
-                                     text=True, check=True, env=env)
+                res = subprocess.run(
+                    [str(python), "-c", _CHILD, str(tmp), b, str(threads)],
+                    capture_output=True,
+                    text=True,
+                    check=True,
+                    env=env,
+                )
                 theirs[b] = json.loads(res.stdout.strip().splitlines()[-1])
             rows: list[dict] = []
             for name, axis in VIEWS.items():
@@ -184,23 +206,32 @@ def main(argv: list[str]) -> int:
             tables.append((threads, rows, load0, _load(), backends))
         version = theirs["scipy"].get("version", "?")
 
-    lines = ["# Geometry bench: equirect -> perspective, holoflow vs py360convert", "",
-             f"Command: `holoflow bench geometry {' '.join(argv)}`".rstrip() + "  ",
-             f"Machine: {header}; torch {torch.__version__} on {args.device}; py360convert {version} in a venv.  ",
-             f"Input: analytic {W}x{H} float32 panorama (holoflow.bench.geometry.field); views {args.size}x{args.size} "
-             f"at {args.fov} deg; cube faces {args.face}. Error = |output - function along the method's own pixel rays|, "
-             "max / mean over all pixels and channels. Time per view (cube: all 6 faces), median of "
-             f"{args.repeat}.  ",
-             "Threads, N per table: holoflow `torch.set_num_threads(N)`; py360convert's cv2 backend "
-             "`cv2.setNumThreads(N)` (its remap is parallel); its scipy backend runs `scipy.ndimage.map_coordinates`, "
-             "which is single-threaded whatever N (OMP/OpenBLAS set to N too)."]
+    lines = [
+        "# Geometry bench: equirect -> perspective, holoflow vs py360convert",
+        "",
+        f"Command: `holoflow bench geometry {' '.join(argv)}`".rstrip() + "  ",
+        f"Machine: {header}; torch {torch.__version__} on {args.device}; py360convert {version} in a venv.  ",
+        f"Input: analytic {W}x{H} float32 panorama (holoflow.bench.geometry.field); views {args.size}x{args.size} "
+        f"at {args.fov} deg; cube faces {args.face}. Error = |output - function along the method's own pixel rays|, "
+        "max / mean over all pixels and channels. Time per view (cube: all 6 faces), median of "
+        f"{args.repeat}.  ",
+        "Threads, N per table: holoflow `torch.set_num_threads(N)`; py360convert's cv2 backend "
+        "`cv2.setNumThreads(N)` (its remap is parallel); its scipy backend runs `scipy.ndimage.map_coordinates`, "
+        "which is single-threaded whatever N (OMP/OpenBLAS set to N too).",
+    ]
     for threads, rows, load0, load1, backends in tables:
         methods = [k for k in rows[0] if k != "case"]
-        lines += ["", f"## {threads} thread{'s' if threads > 1 else ''} (load average {load0:.1f} before, "
-                      f"{load1:.1f} after)", "",
-                  "| case | " + " | ".join(f"{m} ms" for m in methods) + " | "
-                  + " | ".join(f"{m} max / mean err" for m in methods) + " |",
-                  "|---" * (1 + 2 * len(methods)) + "|"]
+        lines += [
+            "",
+            f"## {threads} thread{'s' if threads > 1 else ''} (load average {load0:.1f} before, {load1:.1f} after)",
+            "",
+            "| case | "
+            + " | ".join(f"{m} ms" for m in methods)
+            + " | "
+            + " | ".join(f"{m} max / mean err" for m in methods)
+            + " |",
+            "|---" * (1 + 2 * len(methods)) + "|",
+        ]
         for r in rows:
             times = " | ".join(f"{1000 * r[m][0]:.1f}" for m in methods)
             errs = " | ".join(f"{r[m][1]:.2e} / {r[m][2]:.2e}" for m in methods)
@@ -211,8 +242,10 @@ def main(argv: list[str]) -> int:
             speed = sorted(r[ref][0] / r["holoflow bilinear"][0] for r in rows)[len(rows) // 2]
             slowest = min(r[ref][0] / r["holoflow bilinear"][0] for r in rows)
             err = sorted(r["holoflow bilinear"][1] / r[ref][1] for r in rows)[len(rows) // 2]
-            lines.append(f"- holoflow bilinear vs {ref}: {speed:.2f}x its speed (median over the cases; "
-                         f"worst case {slowest:.2f}x), {err:.2f}x its max error (median).")
+            lines.append(
+                f"- holoflow bilinear vs {ref}: {speed:.2f}x its speed (median over the cases; "
+                f"worst case {slowest:.2f}x), {err:.2f}x its max error (median)."
+            )
     text = "\n".join(lines) + "\n"
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(text)

@@ -6,6 +6,7 @@ each engine (wall and CPU seconds, in this process, torch on one thread as the s
 small PNG previews of every stage to docs/images/ and the timing table to docs/bench-panorama.md,
 naming the machine. A contact sheet shows a dozen prompts' base panoramas side by side.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -23,15 +24,24 @@ SHOWCASE = {  # preview name -> prompt: indoor, outdoor, stylized
     "library-oil": "a grand library with wooden shelves and a marble floor, oil painting",
 }
 DOZEN = [
-    "a cozy living room with a red sofa", "a small bedroom with a lamp at night",
-    "a modern kitchen with white tiles", "a grand library with wooden shelves", "a round marble hall",
-    "an L-shaped loft with brick walls", "a sunny meadow with trees and hills", "a dense forest at sunset",
-    "a sandy beach by the ocean at noon", "a desert with red rocks at dawn",
-    "a foggy city street with tall buildings", "a snowy mountain village in winter",
+    "a cozy living room with a red sofa",
+    "a small bedroom with a lamp at night",
+    "a modern kitchen with white tiles",
+    "a grand library with wooden shelves",
+    "a round marble hall",
+    "an L-shaped loft with brick walls",
+    "a sunny meadow with trees and hills",
+    "a dense forest at sunset",
+    "a sandy beach by the ocean at noon",
+    "a desert with red rocks at dawn",
+    "a foggy city street with tall buildings",
+    "a snowy mountain village in winter",
 ]
 SIZES = {  # stage -> (preview size, paper size), from pipeline.yaml's defaults and paper profile
-    "base_pano": ((1024, 512), (1024, 512)), "stylize": ((1024, 512), (1536, 768)),
-    "upscale": ((2048, 1024), (6144, 3072)), "detail": ((2048, 1024), (6144, 3072)),
+    "base_pano": ((1024, 512), (1024, 512)),
+    "stylize": ((1024, 512), (1536, 768)),
+    "upscale": ((2048, 1024), (6144, 3072)),
+    "detail": ((2048, 1024), (6144, 3072)),
 }
 
 
@@ -71,8 +81,9 @@ def run_chain(prompt: str, sizes: dict[str, tuple[int, int]], samples: int = 2, 
     images["stylize"], images["lineart"] = sty, lines
     up, *times["upscale"] = _timed(lanczos_resize, sty, *sizes["upscale"])
     images["upscale"] = up
-    det, *times["detail"] = _timed(enhance_detail, up if up.shape[1] == sizes["detail"][0]
-                                   else lanczos_resize(up, *sizes["detail"]), 0.5)
+    det, *times["detail"] = _timed(
+        enhance_detail, up if up.shape[1] == sizes["detail"][0] else lanczos_resize(up, *sizes["detail"]), 0.5
+    )
     images["detail"] = det
     return images, times
 
@@ -111,10 +122,15 @@ def main(argv: list[str]) -> int:
         write_preview(images_dir / f"dozen-{_slug(prompt)}.png", rgb, width=256)
 
     engines = {"base_pano": "procedural", "stylize": "classical", "upscale": "lanczos", "detail": "classical"}
-    lines = ["# Panorama stages: default engine timings", "",
-             f"Measured by `holoflow bench panorama{' --paper' if args.paper else ''}` on {host}; the "
-             "machine was shared with other jobs, so wall time is inflated; CPU time is this process's own.",
-             "", "| profile | prompt | stage (engine) | output size | wall s | CPU s |", "|---|---|---|---|---|---|"]
+    lines = [
+        "# Panorama stages: default engine timings",
+        "",
+        f"Measured by `holoflow bench panorama{' --paper' if args.paper else ''}` on {host}; the "
+        "machine was shared with other jobs, so wall time is inflated; CPU time is this process's own.",
+        "",
+        "| profile | prompt | stage (engine) | output size | wall s | CPU s |",
+        "|---|---|---|---|---|---|",
+    ]
     for profile, prompt, times in rows:
         for stage, (wall, cpu) in times.items():
             w, h = SIZES[stage][0 if profile == "preview" else 1]

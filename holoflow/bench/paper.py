@@ -8,6 +8,7 @@ noise, the compute cost is the real one. The run is one ``holoflow run --json`` 
 store; per stage the bench reads the wall time, the peak GPU memory torch allocated and the peak host
 RSS from the step records. Writes docs/bench-paper.md naming the GPU.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,8 +25,12 @@ from holoflow.evaluation.machine import machine
 
 def gpu_name() -> str:
     try:
-        out = subprocess.run(["nvidia-smi", "--query-gpu=name,memory.total,driver_version", "--format=csv,noheader"],
-                             capture_output=True, text=True, timeout=20)
+        out = subprocess.run(
+            ["nvidia-smi", "--query-gpu=name,memory.total,driver_version", "--format=csv,noheader"],
+            capture_output=True,
+            text=True,
+            timeout=20,
+        )
         return out.stdout.strip().splitlines()[0] if out.returncode == 0 and out.stdout.strip() else "no GPU"
     except (OSError, subprocess.TimeoutExpired):
         return "no GPU"
@@ -35,8 +40,12 @@ def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="holoflow bench paper", description=__doc__.splitlines()[0])
     ap.add_argument("--device", default="cuda", choices=["cuda", "cpu"])
     ap.add_argument("--profile", default="paper", help="profile list (default paper; paper,tiny for a smoke run)")
-    ap.add_argument("--models", metavar="DIR", help="models folder with a manifest.json (default: write random "
-                    "full-size models to a temporary folder first, timed on its own)")
+    ap.add_argument(
+        "--models",
+        metavar="DIR",
+        help="models folder with a manifest.json (default: write random "
+        "full-size models to a temporary folder first, timed on its own)",
+    )
     ap.add_argument("--tiny-models", action="store_true", help="random tiny models instead of full-size ones")
     ap.add_argument("--prompt", default="a cozy library")
     ap.add_argument("--timeout", type=float, default=3600, help="give up on the run after this many seconds")
@@ -50,16 +59,40 @@ def main(argv: list[str]) -> int:
 
             models = str(Path(tmp) / "models")
             t0 = time.perf_counter()
-            write_random(Path(models), full=not args.tiny_models, progress=lambda m: print(m, file=sys.stderr),
-                         depth_variant="large")
+            write_random(
+                Path(models),
+                full=not args.tiny_models,
+                progress=lambda m: print(m, file=sys.stderr),
+                depth_variant="large",
+            )
             t_models = time.perf_counter() - t0
         store = Path(tmp) / "artifacts"
-        cmd = [sys.executable, "-m", "holoflow", "run", args.prompt, "--profile", args.profile, "--models", models,
-               "--device", args.device, "--store", str(store), "--json"]
+        cmd = [
+            sys.executable,
+            "-m",
+            "holoflow",
+            "run",
+            args.prompt,
+            "--profile",
+            args.profile,
+            "--models",
+            models,
+            "--device",
+            args.device,
+            "--store",
+            str(store),
+            "--json",
+        ]
         print("holoflow bench paper: " + " ".join(cmd[2:]), file=sys.stderr)
         t0 = time.perf_counter()
-        proc = subprocess.run(cmd, cwd=root, stdout=subprocess.PIPE, text=True, timeout=args.timeout,
-                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        proc = subprocess.run(
+            cmd,
+            cwd=root,
+            stdout=subprocess.PIPE,
+            text=True,
+            timeout=args.timeout,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
         wall = time.perf_counter() - t0
         if proc.returncode != 0:
             print(f"holoflow bench paper: the run failed (exit {proc.returncode})", file=sys.stderr)
@@ -83,16 +116,27 @@ def stage_rows(store: Path, summary: dict) -> list[dict]:
     for name, e in summary["stages"].items():
         prov = (st.record(e["key"]) or {}).get("provenance", {}) if e.get("key") else {}
         meta = prov.get("meta", {})
-        rows.append(dict(stage=name, engine=e.get("engine"), device=e.get("device"), how=e["how"],
-                         wall_s=prov.get("wall_s", e.get("seconds")), gpu_peak_mb=meta.get("gpu_peak_mb"),
-                         rss_mb=prov.get("peak_rss_mb"), gpu=meta.get("gpu"), gaussians=meta.get("gaussians")))
+        rows.append(
+            dict(
+                stage=name,
+                engine=e.get("engine"),
+                device=e.get("device"),
+                how=e["how"],
+                wall_s=prov.get("wall_s", e.get("seconds")),
+                gpu_peak_mb=meta.get("gpu_peak_mb"),
+                rss_mb=prov.get("peak_rss_mb"),
+                gpu=meta.get("gpu"),
+                gaussians=meta.get("gaussians"),
+            )
+        )
     return rows
 
 
 def report(rows: list[dict], wall: float, t_models: float | None, args, summary: dict) -> str:
     gpu = next((r["gpu"] for r in rows if r.get("gpu")), None) or gpu_name()
-    recon = sum(r["wall_s"] or 0 for r in rows if r["stage"] in ("pcd_set", "pano_set", "pre_opt", "inp_set",
-                                                               "transfer_opt"))
+    recon = sum(
+        r["wall_s"] or 0 for r in rows if r["stage"] in ("pcd_set", "pano_set", "pre_opt", "inp_set", "transfer_opt")
+    )
     lines = [
         "# Bench: the paper profile end to end at the paper's sizes",
         "",
@@ -107,8 +151,10 @@ def report(rows: list[dict], wall: float, t_models: float | None, args, summary:
     ]
     for r in rows:
         fmt = lambda v, f="{:.1f}": "-" if v is None else f.format(v)  # noqa: E731
-        lines.append(f"| {r['stage']} | {r['engine']} | {r['device']} | {fmt(r['wall_s'])} | {fmt(r['gpu_peak_mb'], '{:.0f}')} "
-                     f"| {fmt(r['rss_mb'], '{:.0f}')} | {fmt(r['gaussians'], '{:,}')} |")
+        lines.append(
+            f"| {r['stage']} | {r['engine']} | {r['device']} | {fmt(r['wall_s'])} | {fmt(r['gpu_peak_mb'], '{:.0f}')} "
+            f"| {fmt(r['rss_mb'], '{:.0f}')} | {fmt(r['gaussians'], '{:,}')} |"
+        )
     lines += [
         "",
         f"End to end: **{wall:.1f} s** ({wall / 60:.2f} min) for `holoflow run` with all 12 steps"

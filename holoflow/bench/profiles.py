@@ -20,6 +20,7 @@ between ``BEGIN`` / ``END`` markers (the rest of the file is kept), pictures
 ``truth-<case>-<profile>-ring-<r>.jpg`` (truth above render) into ``--pictures``, and with
 ``--json`` every number.
 """
+
 from __future__ import annotations
 
 import json
@@ -32,7 +33,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ("a cozy wooden cabin at night", "a stone courtyard with a fountain")
-PHOTOS = ROOT.parent / "shared" / "data" / "photos"      # the issue's ../shared/data/photos
+PHOTOS = ROOT.parent / "shared" / "data" / "photos"  # the issue's ../shared/data/photos
 PHOTO_PROMPT = "a room"
 PHOTO_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".hdr", ".exr")
 # way -> (--use, --set) of a truth set run (DIR = the truth set's folder); engine names: holoflow/depth/config.py
@@ -50,11 +51,11 @@ class Case:
     """One input: ``name`` (file-name safe), the prompt, and ``uses`` (STAGE=PATH, as --use)."""
 
     name: str
-    kind: str                 # "scene" | "photo" | "truth"
+    kind: str  # "scene" | "photo" | "truth"
     prompt: str
     uses: tuple[str, ...] = ()
     sets: tuple[str, ...] = ()
-    truth: Path | None = None   # a truth set to score the run against per ring
+    truth: Path | None = None  # a truth set to score the run against per ring
 
 
 def stage_costs(store, summary: dict) -> dict[str, dict]:
@@ -63,9 +64,12 @@ def stage_costs(store, summary: dict) -> dict[str, dict]:
     out = {}
     for name, entry in summary["stages"].items():
         prov = (store.record(entry["key"]) or {}).get("provenance", {}) if entry.get("key") else {}
-        out[name] = {"how": entry["how"], "wall_s": float(prov.get("wall_s", math.nan)),
-                     "cpu_s": float(prov.get("cpu_s", math.nan)),
-                     "peak_rss_mb": float(prov.get("peak_rss_mb", math.nan))}
+        out[name] = {
+            "how": entry["how"],
+            "wall_s": float(prov.get("wall_s", math.nan)),
+            "cpu_s": float(prov.get("cpu_s", math.nan)),
+            "peak_rss_mb": float(prov.get("peak_rss_mb", math.nan)),
+        }
     return out
 
 
@@ -80,8 +84,11 @@ def cases(scenes: list[str], photos: Path | None, photo_prompt: str = PHOTO_PROM
     notes = []
     if photos is not None:
         if photos.is_dir():
-            out += [Case(slug(f.stem), "photo", photo_prompt, (f"base_pano={f}",))
-                    for f in sorted(photos.iterdir()) if f.suffix.lower() in PHOTO_EXTS]
+            out += [
+                Case(slug(f.stem), "photo", photo_prompt, (f"base_pano={f}",))
+                for f in sorted(photos.iterdir())
+                if f.suffix.lower() in PHOTO_EXTS
+            ]
         else:
             notes.append(f"no photo folder {photos}: photos not measured")
     return out, notes
@@ -100,8 +107,16 @@ def truth_cases(folder: Path | None, ways: list[str], prompt: str = PHOTO_PROMPT
     out = []
     for way in ways:
         uses, sets = TRUTH_WAYS[way]
-        out.append(Case(f"{slug(folder.name)}-{way}", "truth", prompt,
-                        tuple(u.replace("DIR", str(folder)) for u in uses), sets, folder))
+        out.append(
+            Case(
+                f"{slug(folder.name)}-{way}",
+                "truth",
+                prompt,
+                tuple(u.replace("DIR", str(folder)) for u in uses),
+                sets,
+                folder,
+            )
+        )
     return out, []
 
 
@@ -135,26 +150,39 @@ def measure(case: Case, profile: str, args) -> tuple[dict, dict, dict]:
 
     t0 = time.monotonic()
     load = os.getloadavg()[0]
-    run_dir, summary = run_pipeline(case.prompt, profile, list(args.sets) + list(case.sets), args.store,
-                                    list(case.uses))
+    run_dir, summary = run_pipeline(
+        case.prompt, profile, list(args.sets) + list(case.sets), args.store, list(case.uses)
+    )
     run_s = time.monotonic() - t0
     costs = stage_costs(Store(args.store), summary)
     info = Store(args.store).run_info(run_dir.name) or {}
     t0 = time.monotonic()
-    spec = ViewingSpec(size=args.size, fov_deg=args.fov, nr_cameras=args.nr_cameras, seed=args.seed,
-                       backend=args.backend)
+    spec = ViewingSpec(
+        size=args.size, fov_deg=args.fov, nr_cameras=args.nr_cameras, seed=args.seed, backend=args.backend
+    )
     scores, pictures = score_run(run_dir, info, spec)
     b, nr, nv = scores["base"], scores["nr"], scores["novel"]
-    row = dict(case=case.name, kind=case.kind, profile=profile, run=run_dir.name, load1=round(load, 2),
-               sweep_s=round(run_s, 1), score_s=round(time.monotonic() - t0, 1),
-               wall_s=round(sum(c["wall_s"] for n, c in costs.items() if c["how"] != "used"), 1),
-               cpu_s=round(sum(c["cpu_s"] for n, c in costs.items() if c["how"] != "used"), 1),
-               gaussians=scores["gaussians"], psnr=b["psnr"], psnr_pooled=b["psnr_pooled"], ssim=b["ssim"],
-               polar_psnr=b["polar_psnr"], polar_gap=b["polar_gap_db"],
-               niqe=(nr.get("niqe") or {}).get("ratio", math.nan),
-               brisque=(nr.get("brisque") or {}).get("ratio", math.nan),
-               **{f"empty_{d}": r["empty"] for d, r in nv.items()},
-               **{f"novel_psnr_{d}": r.get("psnr", math.nan) for d, r in nv.items()})
+    row = dict(
+        case=case.name,
+        kind=case.kind,
+        profile=profile,
+        run=run_dir.name,
+        load1=round(load, 2),
+        sweep_s=round(run_s, 1),
+        score_s=round(time.monotonic() - t0, 1),
+        wall_s=round(sum(c["wall_s"] for n, c in costs.items() if c["how"] != "used"), 1),
+        cpu_s=round(sum(c["cpu_s"] for n, c in costs.items() if c["how"] != "used"), 1),
+        gaussians=scores["gaussians"],
+        psnr=b["psnr"],
+        psnr_pooled=b["psnr_pooled"],
+        ssim=b["ssim"],
+        polar_psnr=b["polar_psnr"],
+        polar_gap=b["polar_gap_db"],
+        niqe=(nr.get("niqe") or {}).get("ratio", math.nan),
+        brisque=(nr.get("brisque") or {}).get("ratio", math.nan),
+        **{f"empty_{d}": r["empty"] for d, r in nv.items()},
+        **{f"novel_psnr_{d}": r.get("psnr", math.nan) for d, r in nv.items()},
+    )
     truth_dir = case.truth
     if truth_dir is None and case.kind == "scene" and getattr(args, "scene_truth", False):
         truth_dir = scene_truth_set(run_dir, Path(args.store) / "truth" / case.name)
@@ -186,11 +214,21 @@ def goal_marks(row: dict) -> str:
     from holoflow.evaluation.viewing_size import goals_for
 
     _, g = goals_for(row["profile"])
-    checks = {"psnr": (row["psnr"], False), "brisque": (row["brisque"], True), "niqe": (row["niqe"], True),
-              "polar_gap": (row["polar_gap"], True), "empty_0.5": (row.get("empty_0.5", math.nan), True),
-              "seconds": (row["wall_s"], True)}
-    miss = [k for k, goal in g.items() if k in checks and not math.isnan(checks[k][0])
-            and not (checks[k][0] <= goal if checks[k][1] else checks[k][0] >= goal)]
+    checks = {
+        "psnr": (row["psnr"], False),
+        "brisque": (row["brisque"], True),
+        "niqe": (row["niqe"], True),
+        "polar_gap": (row["polar_gap"], True),
+        "empty_0.5": (row.get("empty_0.5", math.nan), True),
+        "seconds": (row["wall_s"], True),
+    }
+    miss = [
+        k
+        for k, goal in g.items()
+        if k in checks
+        and not math.isnan(checks[k][0])
+        and not (checks[k][0] <= goal if checks[k][1] else checks[k][0] >= goal)
+    ]
     return "all met" if not miss else "missed: " + ", ".join(miss)
 
 
@@ -198,46 +236,68 @@ def _f(x, fmt: str = "{:.2f}") -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else fmt.format(x)
 
 
-def markdown(rows: list[dict], skipped: list[str], notes: list[str], args, machine: str,
-             pictures: dict[str, tuple[str, ...]]) -> str:
+def markdown(
+    rows: list[dict], skipped: list[str], notes: list[str], args, machine: str, pictures: dict[str, tuple[str, ...]]
+) -> str:
     """The generated block: the table, the goals, the skipped profiles and links to the pictures."""
     from holoflow.evaluation.viewing_size import GOALS
 
-    head = ("| input | profile | fresh run s (CPU s) | base PSNR dB (pooled) | SSIM | zenith/nadir gap dB | NIQE x | "
-            "BRISQUE x | empty 0.25 / 0.5 / 1 m % | novel PSNR 0.5 m | Gaussians | goals |")
-    lines = [BEGIN, "",
-             f"Measured with `holoflow bench accuracy --profiles {args.profiles}` on {machine}, "
-             f"load {_f(max((r['load1'] for r in rows), default=math.nan), '{:.1f}')} (1-min average, worst "
-             f"point). Viewing size {args.size} px, {args.fov} deg; base = the scene at the run's base cameras vs "
-             "the source's views (the photo itself for a photo, else the detail panorama), means of the "
-             "per-camera values over the cameras > 25 deg from the poles (pooled: PSNR of their pooled error); "
-             "zenith/nadir gap = their PSNR below that mean; NIQE / BRISQUE = render / source; empty = alpha "
-             "< 0.5 at 8 seeded novel cameras per distance; novel PSNR vs the procedural truth. Seconds: the "
-             "sum of the stages' wall seconds from their run records (what a fresh run costs; the shared "
-             "2-core machine's load included), CPU seconds in brackets.", "",
-             head, "|" + "---|" * 12]
+    head = (
+        "| input | profile | fresh run s (CPU s) | base PSNR dB (pooled) | SSIM | zenith/nadir gap dB | NIQE x | "
+        "BRISQUE x | empty 0.25 / 0.5 / 1 m % | novel PSNR 0.5 m | Gaussians | goals |"
+    )
+    lines = [
+        BEGIN,
+        "",
+        f"Measured with `holoflow bench accuracy --profiles {args.profiles}` on {machine}, "
+        f"load {_f(max((r['load1'] for r in rows), default=math.nan), '{:.1f}')} (1-min average, worst "
+        f"point). Viewing size {args.size} px, {args.fov} deg; base = the scene at the run's base cameras vs "
+        "the source's views (the photo itself for a photo, else the detail panorama), means of the "
+        "per-camera values over the cameras > 25 deg from the poles (pooled: PSNR of their pooled error); "
+        "zenith/nadir gap = their PSNR below that mean; NIQE / BRISQUE = render / source; empty = alpha "
+        "< 0.5 at 8 seeded novel cameras per distance; novel PSNR vs the procedural truth. Seconds: the "
+        "sum of the stages' wall seconds from their run records (what a fresh run costs; the shared "
+        "2-core machine's load included), CPU seconds in brackets.",
+        "",
+        head,
+        "|" + "---|" * 12,
+    ]
     for r in rows:
         e = " / ".join(_f(100 * r.get(f"empty_{d}", math.nan)) for d in ("0.25", "0.5", "1"))
-        lines.append(f"| {r['case']} | {r['profile']} | {_f(r['wall_s'], '{:.0f}')} ({_f(r['cpu_s'], '{:.0f}')}) | "
-                     f"{_f(r['psnr'])} ({_f(r['psnr_pooled'])}) | {_f(r['ssim'], '{:.3f}')} | {_f(r['polar_gap'])} | "
-                     f"{_f(r['niqe'])} | {_f(r['brisque'])} | {e} | {_f(r.get('novel_psnr_0.5', math.nan))} | "
-                     f"{r['gaussians']} | {goal_marks(r)} |")
-    lines += ["", "Goals (issue 31): " + "; ".join(
-        f"{p}: " + ", ".join(f"{k} {'>=' if k == 'psnr' else '<='} {v}" for k, v in g.items())
-        for p, g in GOALS.items()) + " (NIQE / BRISQUE as ratios, empty as a fraction).", ""]
+        lines.append(
+            f"| {r['case']} | {r['profile']} | {_f(r['wall_s'], '{:.0f}')} ({_f(r['cpu_s'], '{:.0f}')}) | "
+            f"{_f(r['psnr'])} ({_f(r['psnr_pooled'])}) | {_f(r['ssim'], '{:.3f}')} | {_f(r['polar_gap'])} | "
+            f"{_f(r['niqe'])} | {_f(r['brisque'])} | {e} | {_f(r.get('novel_psnr_0.5', math.nan))} | "
+            f"{r['gaussians']} | {goal_marks(r)} |"
+        )
+    lines += [
+        "",
+        "Goals (issue 31): "
+        + "; ".join(
+            f"{p}: " + ", ".join(f"{k} {'>=' if k == 'psnr' else '<='} {v}" for k, v in g.items())
+            for p, g in GOALS.items()
+        )
+        + " (NIQE / BRISQUE as ratios, empty as a fraction).",
+        "",
+    ]
     lines += truth_table(rows)
     lines += [f"- skipped: {s}" for s in skipped] + [f"- note: {n}" for n in notes]
     if pictures:
-        lines += ["", f"Pictures (left source, right render, centre 256 px of the {args.size} px views at 1:1; "
-                  "novel views 0.5 m off centre with empty pixels in magenta):", ""]
+        lines += [
+            "",
+            f"Pictures (left source, right render, centre 256 px of the {args.size} px views at 1:1; "
+            "novel views 0.5 m off centre with empty pixels in magenta):",
+            "",
+        ]
         rel = Path(os.path.relpath(args.pictures, args.doc.parent)) if args.doc else Path(args.pictures)
         for key, names in pictures.items():
             if len(names) == 1:
                 lines.append(f"- {key}: [truth above render]({(rel / names[0]).as_posix()})")
                 continue
             base, novel = names
-            lines.append(f"- {key}: [base cameras]({(rel / base).as_posix()}), "
-                         f"[novel 0.5 m]({(rel / novel).as_posix()})")
+            lines.append(
+                f"- {key}: [base cameras]({(rel / base).as_posix()}), [novel 0.5 m]({(rel / novel).as_posix()})"
+            )
     return "\n".join(lines + ["", END]) + "\n"
 
 
@@ -247,18 +307,25 @@ def truth_table(rows: list[dict]) -> list[str]:
     rows = [r for r in rows if "truth_psnr_0" in r]
     if not rows:
         return []
-    rings = sorted({k[len("truth_psnr_"):] for r in rows for k in r if k.startswith("truth_psnr_")}, key=float)
-    lines = ["Truth set (`--truth`): the scene at the truth views' cameras (512 px, 47.43 deg) against their "
-             "ray-cast truth, PSNR pooled over each ring's 8 views (sRGB); AbsRel of the rendered depth, empty "
-             "(alpha < 0.5) and cracked (alpha < 0.9) at 0.5 m:", "",
-             "| input | profile | fresh run s | " + " | ".join(f"{k} m dB" for k in rings)
-             + " | AbsRel 0.5 m | empty 0.5 m % | alpha < 0.9 at 0.5 m % |", "|" + "---|" * (len(rings) + 6)]
+    rings = sorted({k[len("truth_psnr_") :] for r in rows for k in r if k.startswith("truth_psnr_")}, key=float)
+    lines = [
+        "Truth set (`--truth`): the scene at the truth views' cameras (512 px, 47.43 deg) against their "
+        "ray-cast truth, PSNR pooled over each ring's 8 views (sRGB); AbsRel of the rendered depth, empty "
+        "(alpha < 0.5) and cracked (alpha < 0.9) at 0.5 m:",
+        "",
+        "| input | profile | fresh run s | "
+        + " | ".join(f"{k} m dB" for k in rings)
+        + " | AbsRel 0.5 m | empty 0.5 m % | alpha < 0.9 at 0.5 m % |",
+        "|" + "---|" * (len(rings) + 6),
+    ]
     for r in rows:
-        lines.append(f"| {r['case']} | {r['profile']} | {_f(r['wall_s'], '{:.0f}')} | "
-                     + " | ".join(_f(r.get(f"truth_psnr_{k}", math.nan)) for k in rings)
-                     + f" | {_f(r.get('truth_abs_rel_0.5', math.nan), '{:.4f}')} | "
-                     f"{_f(100 * r.get('truth_empty_0.5', math.nan))} | "
-                     f"{_f(100 * r.get('truth_cracked_0.5', math.nan))} |")
+        lines.append(
+            f"| {r['case']} | {r['profile']} | {_f(r['wall_s'], '{:.0f}')} | "
+            + " | ".join(_f(r.get(f"truth_psnr_{k}", math.nan)) for k in rings)
+            + f" | {_f(r.get('truth_abs_rel_0.5', math.nan), '{:.4f}')} | "
+            f"{_f(100 * r.get('truth_empty_0.5', math.nan))} | "
+            f"{_f(100 * r.get('truth_cracked_0.5', math.nan))} |"
+        )
     return lines + [""]
 
 
@@ -278,8 +345,9 @@ def write(args, block: str, runs: list[dict], skipped: list[str], notes: list[st
         args.doc.parent.mkdir(parents=True, exist_ok=True)
         args.doc.write_text(replace_block(args.doc.read_text() if args.doc.is_file() else "", block))
     if args.json:
-        args.json.write_text(json.dumps(dict(machine=machine(), skipped=skipped, notes=notes, runs=runs), indent=1,
-                                        default=str))
+        args.json.write_text(
+            json.dumps(dict(machine=machine(), skipped=skipped, notes=notes, runs=runs), indent=1, default=str)
+        )
 
 
 def main(args) -> int:
@@ -295,8 +363,9 @@ def main(args) -> int:
     profiles = [p for p in args.profiles.split(",") if p]
     photos = Path(args.photos) if args.photos else None
     todo, notes = cases([s for s in args.scenes.split(";") if s], photos, args.photo_prompt)
-    more, why = truth_cases(Path(args.truth) if args.truth else None, [w for w in args.truth_ways.split(",") if w],
-                            args.photo_prompt)
+    more, why = truth_cases(
+        Path(args.truth) if args.truth else None, [w for w in args.truth_ways.split(",") if w], args.photo_prompt
+    )
     todo, notes = todo + more, notes + why
     for n in why:
         print(f"accuracy: {n}", file=sys.stderr, flush=True)
@@ -314,9 +383,13 @@ def main(args) -> int:
             row, scores, pictures = measure(case, p, args)
             rows.append(row)
             everything.append(dict(row=row, scores=scores))
-            print(f"accuracy: {case.name} {p}: {row['wall_s']:.0f} s fresh run, base {row['psnr']:.2f} dB, "
-                  f"BRISQUE x{row['brisque']:.2f}, zenith/nadir gap {row['polar_gap']:.2f} dB, 0.5 m empty "
-                  f"{100 * row.get('empty_0.5', math.nan):.2f} % ({goal_marks(row)})", file=sys.stderr, flush=True)
+            print(
+                f"accuracy: {case.name} {p}: {row['wall_s']:.0f} s fresh run, base {row['psnr']:.2f} dB, "
+                f"BRISQUE x{row['brisque']:.2f}, zenith/nadir gap {row['polar_gap']:.2f} dB, 0.5 m empty "
+                f"{100 * row.get('empty_0.5', math.nan):.2f} % ({goal_marks(row)})",
+                file=sys.stderr,
+                flush=True,
+            )
             if args.pictures:
                 args.pictures.mkdir(parents=True, exist_ok=True)
                 names = (f"viewing-{case.name}-{p}-base.jpg", f"viewing-{case.name}-{p}-novel.jpg")
@@ -332,6 +405,9 @@ def main(args) -> int:
     block = markdown(rows, skipped, notes, args, machine(), pics)
     write(args, block, everything, skipped, notes)
     print(block)
-    print(f"accuracy: {len(rows)} runs scored at {args.size} px; {len(skipped)} profile(s) skipped"
-          + (f"; table in {args.doc}" if args.doc else ""), file=sys.stderr)
+    print(
+        f"accuracy: {len(rows)} runs scored at {args.size} px; {len(skipped)} profile(s) skipped"
+        + (f"; table in {args.doc}" if args.doc else ""),
+        file=sys.stderr,
+    )
     return 0

@@ -19,6 +19,7 @@ reports the spread of its AbsRel over the turns: a change smaller than that spre
 Writes docs/bench-realdepth.md and docs/images/realdepth-*.png. Skips with a message when the data
 folder is absent.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -36,8 +37,7 @@ from holoflow.evaluation.machine import load, machine
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "realdepth"
 PROMPTS = ("a cozy living room with a sofa and a lamp", "a sunny meadow with trees")
-ENGINES = {"prior": ["--set", "tangent_depth.engine=prior", "--set", "metric_align.engine=prior"],
-           "default": []}
+ENGINES = {"prior": ["--set", "tangent_depth.engine=prior", "--set", "metric_align.engine=prior"], "default": []}
 
 
 def run_pipeline(store: Path, prompt: str, extra: list[str]) -> tuple[np.ndarray, dict, float]:
@@ -48,15 +48,23 @@ def run_pipeline(store: Path, prompt: str, extra: list[str]) -> tuple[np.ndarray
 
     env = {**os.environ, "HOLOFLOW_STORE": str(store)}
     root = Path(__file__).resolve().parents[2]
-    proc = subprocess.run([sys.executable, "-m", "holoflow", "run", prompt, *extra, "--until", "metric_align"],
-                          cwd=root, env=env, capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "holoflow", "run", prompt, *extra, "--until", "metric_align"],
+        cwd=root,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
     if proc.returncode != 0:
         raise RuntimeError(f"holoflow run failed: {proc.stderr.strip().splitlines()[-1:]}")
     st = Store(store)
     run = st.run_ids()[-1]
     stages = st.run_info(run)["stages"]
-    seconds = sum(st.record(stages[n]["key"])["provenance"]["wall_s"] for n in ("tangent_depth", "metric_align")
-                  if stages[n]["how"] == "ran")
+    seconds = sum(
+        st.record(stages[n]["key"])["provenance"]["wall_s"]
+        for n in ("tangent_depth", "metric_align")
+        if stages[n]["how"] == "ran"
+    )
     out = st.run_dir(run) / "metric_align"
     ch, _ = read_exr(out / "depth.exr")
     return ch["Z"].astype(np.float64), json.loads((out / "metric_align.json").read_text()), seconds
@@ -113,20 +121,25 @@ def turned_abs_rel(pano: np.ndarray, truth: np.ndarray, scale: str, turns: int) 
 
 
 def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="holoflow bench realdepth",
-                                 description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = argparse.ArgumentParser(
+        prog="holoflow bench realdepth", description=" ".join(__doc__.split("\n\n")[0].split())
+    )
     ap.add_argument("--data", default=str(DATA), help="folder of NAME_rgb.png + NAME_depth.exr")
     ap.add_argument("--out", default="docs", help="folder for bench-realdepth.md (images/ beneath it)")
     ap.add_argument("--prompts", default="|".join(PROMPTS), help="procedural scenes, '|'-separated ('' = none)")
     ap.add_argument("--only", default="", help="comma-separated item names (default: all)")
-    ap.add_argument("--turns", type=int, default=4,
-                    help="layout runs per item, turned by i x 45 / N degrees, for the AbsRel spread (0 = none)")
+    ap.add_argument(
+        "--turns",
+        type=int,
+        default=4,
+        help="layout runs per item, turned by i x 45 / N degrees, for the AbsRel spread (0 = none)",
+    )
     args = ap.parse_args(argv)
     data = Path(args.data)
     if not data.is_dir():
         print(f"bench realdepth: {data} is absent; nothing to measure (skipped)")
         return 0
-    names = sorted(p.name[:-len("_rgb.png")] for p in data.glob("*_rgb.png"))
+    names = sorted(p.name[: -len("_rgb.png")] for p in data.glob("*_rgb.png"))
     if args.only:
         names = [n for n in names if n in args.only.split(",")]
     rows, pics = [], []
@@ -137,8 +150,9 @@ def main(argv: list[str]) -> int:
             row = {"name": name, "scale": scale}
             preds = {}
             for eng, extra in ENGINES.items():
-                depth, rep, sec = run_pipeline(Path(tmp) / name, "a room",
-                                               ["--use", f"base_pano={data / f'{name}_rgb.png'}", *extra])
+                depth, rep, sec = run_pipeline(
+                    Path(tmp) / name, "a room", ["--use", f"base_pano={data / f'{name}_rgb.png'}", *extra]
+                )
                 row[eng] = score(depth, truth, scale)
                 row[eng]["seconds"] = round(sec, 1)
                 row[eng]["engine"] = rep["engine"]["engine"]
@@ -147,24 +161,34 @@ def main(argv: list[str]) -> int:
                     row["scene"] = lay.get("scene")
                     row["tilt_deg"] = (lay.get("upright") or {}).get("tilt_deg")
                 preds[eng] = depth
-                print(f"{name} {eng}: {rep['engine']['engine']} AbsRel {row[eng]['abs_rel']:.3f} "
-                      f"delta1 {row[eng]['delta1']:.3f} ({sec:.1f} s)", flush=True)
+                print(
+                    f"{name} {eng}: {rep['engine']['engine']} AbsRel {row[eng]['abs_rel']:.3f} "
+                    f"delta1 {row[eng]['delta1']:.3f} ({sec:.1f} s)",
+                    flush=True,
+                )
             if args.turns > 0 and row["default"]["engine"] == "layout":
-                row["turns"] = turned_abs_rel(detail_input(Path(tmp) / name, preds["default"].shape[1]),
-                                              truth, scale, args.turns)
-                print(f"{name} layout over {args.turns} turns: AbsRel "
-                      + " ".join(f"{a:.3f}" for a in row["turns"]), flush=True)
+                row["turns"] = turned_abs_rel(
+                    detail_input(Path(tmp) / name, preds["default"].shape[1]), truth, scale, args.turns
+                )
+                print(
+                    f"{name} layout over {args.turns} turns: AbsRel " + " ".join(f"{a:.3f}" for a in row["turns"]),
+                    flush=True,
+                )
             rows.append(row)
             pics.append((name, data / f"{name}_rgb.png", truth, preds))
         proc_rows = []
         for prompt in [p for p in args.prompts.split("|") if p]:
             row = {"name": prompt}
-            for eng, extra in {**ENGINES, "layout": ["--set", "tangent_depth.engine=layout",
-                                                     "--set", "metric_align.engine=layout"]}.items():
+            for eng, extra in {
+                **ENGINES,
+                "layout": ["--set", "tangent_depth.engine=layout", "--set", "metric_align.engine=layout"],
+            }.items():
                 depth, rep, sec = run_pipeline(Path(tmp) / "procedural", prompt, extra)
                 m = rep.get("truth_metrics", {})
                 row[eng] = {**m, "engine": rep["engine"]["engine"], "seconds": round(sec, 1)}
-                print(f"{prompt} {eng}: {rep['engine']['engine']} AbsRel {m.get('abs_rel', float('nan')):.3f}", flush=True)
+                print(
+                    f"{prompt} {eng}: {rep['engine']['engine']} AbsRel {m.get('abs_rel', float('nan')):.3f}", flush=True
+                )
             proc_rows.append(row)
     out = Path(args.out)
     (out / "images").mkdir(parents=True, exist_ok=True)
@@ -217,54 +241,83 @@ def write_table(path: Path, rows, proc_rows, seconds: float, data: Path) -> None
         v = m.get(k)
         return "-" if v is None or (isinstance(v, float) and np.isnan(v)) else f"{v:.3f}"
 
-    lines = ["# Depth on real panoramas (`holoflow bench realdepth`)", "",
-             f"Measured {time.strftime('%Y-%m-%d')} on {machine()} (load {load()}), {seconds:.0f} s in all. "
-             "Data: the real panoramas with measured depth in `../shared/data/realdepth/` (third-party files, "
-             "sources in its README: 3D60 re-renders of Matterport3D and Stanford2D3D, Structured3D, RealSee3D, "
-             "Google Street View); never copied into the project.", "",
-             "Each item runs through the **default pipeline** (`holoflow run \"a room\" --use base_pano=NAME_rgb.png "
-             "--until metric_align`, preview profile) and the **metric_align output** is scored (docs/depth.md, "
-             "Metrics). `default` = the default engines (`auto` -> `layout` on an image without truth); `prior` = "
-             "the constant room prior (`--set tangent_depth.engine=prior --set metric_align.engine=prior`). "
-             "`metric` items are scored as they are; `relative` and `ordinal` items after a median scale fit "
-             "(ordinal: coarse, read with care).", "",
-             "`s` = seconds the two depth steps (tangent_depth + metric_align) took: what the accuracy "
-             "costs. `turns` = AbsRel of the layout engine straight on the panorama it "
-             "received, turned about the vertical axis (module docstring): mean (min-max); a difference "
-             "smaller than this spread is noise.", "",
-             "| item | truth | scene | prior AbsRel | prior RMSE | prior delta1 | prior s | default AbsRel | "
-             "default RMSE | default delta1 | default s | turns AbsRel |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Depth on real panoramas (`holoflow bench realdepth`)",
+        "",
+        f"Measured {time.strftime('%Y-%m-%d')} on {machine()} (load {load()}), {seconds:.0f} s in all. "
+        "Data: the real panoramas with measured depth in `../shared/data/realdepth/` (third-party files, "
+        "sources in its README: 3D60 re-renders of Matterport3D and Stanford2D3D, Structured3D, RealSee3D, "
+        "Google Street View); never copied into the project.",
+        "",
+        'Each item runs through the **default pipeline** (`holoflow run "a room" --use base_pano=NAME_rgb.png '
+        "--until metric_align`, preview profile) and the **metric_align output** is scored (docs/depth.md, "
+        "Metrics). `default` = the default engines (`auto` -> `layout` on an image without truth); `prior` = "
+        "the constant room prior (`--set tangent_depth.engine=prior --set metric_align.engine=prior`). "
+        "`metric` items are scored as they are; `relative` and `ordinal` items after a median scale fit "
+        "(ordinal: coarse, read with care).",
+        "",
+        "`s` = seconds the two depth steps (tangent_depth + metric_align) took: what the accuracy "
+        "costs. `turns` = AbsRel of the layout engine straight on the panorama it "
+        "received, turned about the vertical axis (module docstring): mean (min-max); a difference "
+        "smaller than this spread is noise.",
+        "",
+        "| item | truth | scene | prior AbsRel | prior RMSE | prior delta1 | prior s | default AbsRel | "
+        "default RMSE | default delta1 | default s | turns AbsRel |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['name']} | {r['scale']} | {r.get('scene') or '-'} | {f(r['prior'], 'abs_rel')} | "
-                     f"{f(r['prior'], 'rmse')} | {f(r['prior'], 'delta1')} | {r['prior']['seconds']:.1f} | "
-                     f"{f(r['default'], 'abs_rel')} | {f(r['default'], 'rmse')} | {f(r['default'], 'delta1')} | "
-                     f"{r['default']['seconds']:.1f} | {spread(r.get('turns'))} |")
-    indoor = [r for r in rows if r["scale"] == "metric" and r.get("scene", "indoor") == "indoor"
-              and not r["name"].startswith("gsv")]
+        lines.append(
+            f"| {r['name']} | {r['scale']} | {r.get('scene') or '-'} | {f(r['prior'], 'abs_rel')} | "
+            f"{f(r['prior'], 'rmse')} | {f(r['prior'], 'delta1')} | {r['prior']['seconds']:.1f} | "
+            f"{f(r['default'], 'abs_rel')} | {f(r['default'], 'rmse')} | {f(r['default'], 'delta1')} | "
+            f"{r['default']['seconds']:.1f} | {spread(r.get('turns'))} |"
+        )
+    indoor = [
+        r
+        for r in rows
+        if r["scale"] == "metric" and r.get("scene", "indoor") == "indoor" and not r["name"].startswith("gsv")
+    ]
     if indoor:
-        med = {e: {k: float(np.median([r[e][k] for r in indoor])) for k in ("abs_rel", "rmse", "delta1")}
-               for e in ("prior", "default")}
+        med = {
+            e: {k: float(np.median([r[e][k] for r in indoor])) for k in ("abs_rel", "rmse", "delta1")}
+            for e in ("prior", "default")
+        }
         turned = [r["turns"] for r in indoor if r.get("turns")]
-        med_turns = f"**{np.median([np.mean(t) for t in turned]):.3f}** (median of means)" \
-            if len(turned) == len(indoor) else ""
-        lines.append(f"| **median, {len(indoor)} indoor metric items** | | | **{f(med['prior'], 'abs_rel')}** | "
-                     f"**{f(med['prior'], 'rmse')}** | **{f(med['prior'], 'delta1')}** | | "
-                     f"**{f(med['default'], 'abs_rel')}** | **{f(med['default'], 'rmse')}** | "
-                     f"**{f(med['default'], 'delta1')}** | | {med_turns} |")
+        med_turns = (
+            f"**{np.median([np.mean(t) for t in turned]):.3f}** (median of means)" if len(turned) == len(indoor) else ""
+        )
+        lines.append(
+            f"| **median, {len(indoor)} indoor metric items** | | | **{f(med['prior'], 'abs_rel')}** | "
+            f"**{f(med['prior'], 'rmse')}** | **{f(med['prior'], 'delta1')}** | | "
+            f"**{f(med['default'], 'abs_rel')}** | **{f(med['default'], 'rmse')}** | "
+            f"**{f(med['default'], 'delta1')}** | | {med_turns} |"
+        )
         goal = med["default"]["abs_rel"] <= 0.20 and med["default"]["delta1"] >= 0.70
-        lines += ["", "Goal of the default engine on the indoor metric items: AbsRel <= 0.20 and delta1 >= 0.70 -> "
-                  f"**{'met' if goal else 'NOT met'}** (median AbsRel {f(med['default'], 'abs_rel')}, "
-                  f"delta1 {f(med['default'], 'delta1')})."]
+        lines += [
+            "",
+            "Goal of the default engine on the indoor metric items: AbsRel <= 0.20 and delta1 >= 0.70 -> "
+            f"**{'met' if goal else 'NOT met'}** (median AbsRel {f(med['default'], 'abs_rel')}, "
+            f"delta1 {f(med['default'], 'delta1')}).",
+        ]
     if proc_rows:
-        lines += ["", "## Procedural scenes (exact truth)", "",
-                  "| prompt | default (auto -> simulated) AbsRel / delta1 | prior AbsRel / delta1 | layout AbsRel / delta1 |",
-                  "|---|---|---|---|"]
+        lines += [
+            "",
+            "## Procedural scenes (exact truth)",
+            "",
+            "| prompt | default (auto -> simulated) AbsRel / delta1 | prior AbsRel / delta1 | layout AbsRel / delta1 |",
+            "|---|---|---|---|",
+        ]
         for r in proc_rows:
-            lines.append(f"| {r['name']} | {f(r['default'], 'abs_rel')} / {f(r['default'], 'delta1')} | "
-                         f"{f(r['prior'], 'abs_rel')} / {f(r['prior'], 'delta1')} | "
-                         f"{f(r['layout'], 'abs_rel')} / {f(r['layout'], 'delta1')} |")
-    lines += ["", "Pictures (image | truth / default | default / truth; depth as log depth 0.5-20 m, bright = "
-              "near, black = no value or sky; error red = too far, blue = too near, full at a factor of 3): "
-              + ", ".join(f"[{r['name']}](images/realdepth-{r['name']}.png)" for r in rows), ""]
+            lines.append(
+                f"| {r['name']} | {f(r['default'], 'abs_rel')} / {f(r['default'], 'delta1')} | "
+                f"{f(r['prior'], 'abs_rel')} / {f(r['prior'], 'delta1')} | "
+                f"{f(r['layout'], 'abs_rel')} / {f(r['layout'], 'delta1')} |"
+            )
+    lines += [
+        "",
+        "Pictures (image | truth / default | default / truth; depth as log depth 0.5-20 m, bright = "
+        "near, black = no value or sky; error red = too far, blue = too near, full at a factor of 3): "
+        + ", ".join(f"[{r['name']}](images/realdepth-{r['name']}.png)" for r in rows),
+        "",
+    ]
     path.write_text("\n".join(lines))

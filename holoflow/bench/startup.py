@@ -9,6 +9,7 @@ counted: once per run). End to end: ``holoflow run PROMPT`` on a fresh store, pe
 each variant (baseline, cold, warm) back to back, so the machine's load hits all of them alike;
 medians over the rounds, and the runs' output digests compared. Writes docs/bench-startup.md.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -62,18 +63,22 @@ def step_startup(pipe_path: Path, rounds: int) -> list[tuple[str, list[float], l
             for name, stage in pipe.stages.items():
                 program = pipe.program(name)
                 heavy = preload(sorted(hasher.external(program)))
-                ours = sorted(_module_name(f) for f in hasher.closure(program)
-                              if f.startswith("holoflow/") and f.endswith(".py"))
+                ours = sorted(
+                    _module_name(f) for f in hasher.closure(program) if f.startswith("holoflow/") and f.endswith(".py")
+                )
                 probe = Path(tmp) / f"{name}.py"
                 probe.write_text("".join(f"import {m}\n" for m in heavy + ours))
                 threads = step_env(stage.resources.as_dict())
                 union.setdefault(tuple(threads.items()), set()).update(heavy)
                 probes.append((name, probe, threads))
             (Path(tmp) / "nothing.py").write_text("")
-            for threads, heavy in union.items():      # as the executor's expect(): one template each,
-                launcher.ensure(dict(threads), sorted(heavy))      # its imports done before timing
-                _timed(lambda: launcher.start(str(Path(tmp) / "nothing.py"), "-", str(pipe.root),
-                                              dict(os.environ, **dict(threads))))
+            for threads, heavy in union.items():  # as the executor's expect(): one template each,
+                launcher.ensure(dict(threads), sorted(heavy))  # its imports done before timing
+                _timed(
+                    lambda: launcher.start(
+                        str(Path(tmp) / "nothing.py"), "-", str(pipe.root), dict(os.environ, **dict(threads))
+                    )
+                )
             for name, probe, threads in probes:
                 env = dict(os.environ, PYTHONUNBUFFERED="1", **threads)
                 cold, warm = [], []
@@ -105,7 +110,9 @@ def _timed(start) -> float:
 def end_to_end(pipe: Path, prompt: str, rounds: int, baseline: str | None) -> dict:
     """{variant: [(seconds, output digests), ...]} over ``rounds`` interleaved rounds."""
     variants = ([("baseline", Path(baseline).absolute(), [])] if baseline else []) + [
-        ("cold", pipe.parent, ["--cold"]), ("warm", pipe.parent, [])]
+        ("cold", pipe.parent, ["--cold"]),
+        ("warm", pipe.parent, []),
+    ]
     out: dict = {v[0]: [] for v in variants}
     with tempfile.TemporaryDirectory(prefix="holoflow-e2e-") as tmp:
         for r in range(rounds):
@@ -113,8 +120,19 @@ def end_to_end(pipe: Path, prompt: str, rounds: int, baseline: str | None) -> di
                 store = Path(tmp) / f"{name}-{r}"
                 env = dict(os.environ, PYTHONPATH=str(root))
                 env.pop("HOLOFLOW_COLD", None)
-                cmd = [sys.executable, "-m", "holoflow", "run", prompt, "--pipeline", str(root / "pipeline.yaml"),
-                       "--store", str(store), "--json", *extra]
+                cmd = [
+                    sys.executable,
+                    "-m",
+                    "holoflow",
+                    "run",
+                    prompt,
+                    "--pipeline",
+                    str(root / "pipeline.yaml"),
+                    "--store",
+                    str(store),
+                    "--json",
+                    *extra,
+                ]
                 t0 = time.perf_counter()
                 p = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True)
                 dt = time.perf_counter() - t0
@@ -129,38 +147,54 @@ def end_to_end(pipe: Path, prompt: str, rounds: int, baseline: str | None) -> di
 
 def report(args, steps, e2e) -> str:
     med = statistics.median
-    lines = ["# Start-up: cold against warm steps", "",
-             f"`holoflow bench startup --rounds {args.rounds}`"
-             + (f" `--baseline {args.baseline}`" if args.baseline else "") + f", {time.strftime('%Y-%m-%d')}, "
-             f"on {machine()}; load average after: {load()} (1 is the bench itself; more means other work "
-             f"shared the machine). All timings are wall clock, medians of interleaved rounds.", "",
-             "## Per step: launch + imports, until the step could start working", "",
-             "Probe: a program importing what the stage's import closure imports; cold = exec'd "
-             "(`python PROBE`), warm = forked from the run's template (which preloaded the heavy "
-             "third-party modules once).", "",
-             "| stage | cold s | warm s | saved s |", "|---|---:|---:|---:|"]
+    lines = [
+        "# Start-up: cold against warm steps",
+        "",
+        f"`holoflow bench startup --rounds {args.rounds}`"
+        + (f" `--baseline {args.baseline}`" if args.baseline else "")
+        + f", {time.strftime('%Y-%m-%d')}, "
+        f"on {machine()}; load average after: {load()} (1 is the bench itself; more means other work "
+        f"shared the machine). All timings are wall clock, medians of interleaved rounds.",
+        "",
+        "## Per step: launch + imports, until the step could start working",
+        "",
+        "Probe: a program importing what the stage's import closure imports; cold = exec'd "
+        "(`python PROBE`), warm = forked from the run's template (which preloaded the heavy "
+        "third-party modules once).",
+        "",
+        "| stage | cold s | warm s | saved s |",
+        "|---|---:|---:|---:|",
+    ]
     for name, cold, warm in steps:
         lines.append(f"| {name} | {med(cold):.2f} | {med(warm):.3f} | {med(cold) - med(warm):.2f} |")
     total = sum(med(c) - med(w) for _, c, w in steps)
     lines += ["", f"Sum of the savings over the {len(steps)} steps: {total:.1f} s.", ""]
     if e2e:
-        lines += ["## The preview end to end (fresh store)", "",
-                  f"`holoflow run \"{args.prompt}\"` (default profile), each round runs every variant "
-                  "back to back.", "", "| variant | seconds per round | median s | vs first |",
-                  "|---|---|---:|---:|"]
+        lines += [
+            "## The preview end to end (fresh store)",
+            "",
+            f'`holoflow run "{args.prompt}"` (default profile), each round runs every variant back to back.',
+            "",
+            "| variant | seconds per round | median s | vs first |",
+            "|---|---|---:|---:|",
+        ]
         first = med([t for t, _ in next(iter(e2e.values()))])
         for name, runs in e2e.items():
             secs = [t for t, _ in runs]
-            lines.append(f"| {name} | {', '.join(f'{s:.1f}' for s in secs)} | {med(secs):.1f} | "
-                         f"{med(secs) / first:.2f}x |")
+            lines.append(
+                f"| {name} | {', '.join(f'{s:.1f}' for s in secs)} | {med(secs):.1f} | {med(secs) / first:.2f}x |"
+            )
         ref = e2e["cold"][0][1]
         same = all(d == ref for name in ("cold", "warm") for _, d in e2e[name])
-        lines += ["", f"Output digests of every stage, cold and warm, all rounds: "
-                  f"{'identical' if same else 'DIFFERENT'}."]
+        lines += [
+            "",
+            f"Output digests of every stage, cold and warm, all rounds: {'identical' if same else 'DIFFERENT'}.",
+        ]
         if "baseline" in e2e:
             base = e2e["baseline"][0][1]
             differ = sorted(n for n in ref if base.get(n) != ref[n])
-            lines.append(f"Against the baseline checkout: {', '.join(differ) or 'none'} differ "
-                         "(code changed between the two).")
+            lines.append(
+                f"Against the baseline checkout: {', '.join(differ) or 'none'} differ (code changed between the two)."
+            )
         lines.append("")
     return "\n".join(lines)

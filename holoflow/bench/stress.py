@@ -6,6 +6,7 @@ processes compete for the cores, and compares every artifact's digest with the f
 stops after ``--rounds`` rounds or once ``--budget-s`` seconds have passed (after the round that
 crosses it). The hogs are started and stopped by their own pids. Writes docs/bench-stress.md.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -38,8 +39,21 @@ def hogs(n: int) -> Iterator[list[int]]:
 
 def run_digests(store: Path, pipeline: Path, prompt: str, profile: str, *extra: str) -> dict[str, dict[str, str]]:
     """``holoflow run`` into ``store``; {stage: {file: digest}} of the run (raises on failure)."""
-    cmd = [sys.executable, "-m", "holoflow", "run", prompt, "--pipeline", str(pipeline), "--profile", profile,
-           "--store", str(store), "--json", *extra]
+    cmd = [
+        sys.executable,
+        "-m",
+        "holoflow",
+        "run",
+        prompt,
+        "--pipeline",
+        str(pipeline),
+        "--profile",
+        profile,
+        "--store",
+        str(store),
+        "--json",
+        *extra,
+    ]
     done = subprocess.run(cmd, cwd=pipeline.parent, capture_output=True, text=True, timeout=1800)
     if done.returncode != 0:
         raise RuntimeError(f"holoflow run failed (exit {done.returncode}): {done.stderr.strip()[-2000:]}")
@@ -55,8 +69,16 @@ def differences(ref: dict[str, dict[str, str]], got: dict[str, dict[str, str]]) 
     return out
 
 
-def stress(pipeline: Path, rounds: int, n_hogs: int, budget_s: float, profile: str = "tiny",
-           prompt: str = PROMPT, force: list[str] | None = None, store: Path | None = None) -> dict:
+def stress(
+    pipeline: Path,
+    rounds: int,
+    n_hogs: int,
+    budget_s: float,
+    profile: str = "tiny",
+    prompt: str = PROMPT,
+    force: list[str] | None = None,
+    store: Path | None = None,
+) -> dict:
     """Rounds of runs beside ``n_hogs`` hogs. Without ``force``: each round two fresh stores; with it,
     ``--force`` of those stages in ``store`` (which must already hold the run). Returns {rounds: [{seconds,
     diffs}], reference, load}; any non-empty diffs is a reproducibility failure."""
@@ -89,8 +111,13 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--rounds", type=int, default=5, help="rounds, two fresh stores each (default 5)")
     ap.add_argument("--hogs", type=int, default=4, help="busy-loop processes beside the runs (default 4)")
     ap.add_argument("--budget-s", type=float, default=1800.0, help="stop after the round that passes this")
-    ap.add_argument("--force", action="append", default=[], metavar="STAGE",
-                    help="rerun STAGE in one store instead of two fresh stores a round (repeatable)")
+    ap.add_argument(
+        "--force",
+        action="append",
+        default=[],
+        metavar="STAGE",
+        help="rerun STAGE in one store instead of two fresh stores a round (repeatable)",
+    )
     ap.add_argument("--store", help="the store for --force (default: a fresh one, run once first)")
     ap.add_argument("--out", default="docs/bench-stress.md")
     args = ap.parse_args(argv)
@@ -106,19 +133,27 @@ def main(argv: list[str]) -> int:
 
 def report(args, res: dict) -> str:
     bad = [r for r in res["rounds"] if r["diffs"]]
-    what = (f"`--force {' --force '.join(res['force'])}` in one store" if res["force"]
-            else "two fresh stores a round")
+    what = f"`--force {' --force '.join(res['force'])}` in one store" if res["force"] else "two fresh stores a round"
     lines = [
-        "# Stress: the same run, bytes compared, beside CPU hogs (`holoflow bench stress`)", "",
-        f"Machine: {machine()}. Load average before / after: {res['load_before']} / {res['load_after']}.", "",
+        "# Stress: the same run, bytes compared, beside CPU hogs (`holoflow bench stress`)",
+        "",
+        f"Machine: {machine()}. Load average before / after: {res['load_before']} / {res['load_after']}.",
+        "",
         f"`holoflow bench stress --profile {args.profile} --rounds {args.rounds} --hogs {args.hogs}"
-        + "".join(f" --force {s}" for s in res["force"]) + f"`: {len(res['rounds'])} rounds, {what}, "
-        f"{res['hogs']} busy-loop processes beside them, every artifact's digest compared with the first run's.", "",
-        "| round | seconds | differing artifacts |", "|---|---|---|",
+        + "".join(f" --force {s}" for s in res["force"])
+        + f"`: {len(res['rounds'])} rounds, {what}, "
+        f"{res['hogs']} busy-loop processes beside them, every artifact's digest compared with the first run's.",
+        "",
+        "| round | seconds | differing artifacts |",
+        "|---|---|---|",
     ]
     for i, r in enumerate(res["rounds"]):
         lines.append(f"| {i + 1} | {r['seconds']} | {', '.join(r['diffs']) or 'none'} |")
     n = sum(len(v) for v in (res["reference"] or {}).values())
-    lines += ["", f"Result: {'FAILED: ' + str(len(bad)) + ' round(s) differ' if bad else 'all rounds byte-identical'} "
-              f"({n} artifacts a run).", ""]
+    lines += [
+        "",
+        f"Result: {'FAILED: ' + str(len(bad)) + ' round(s) differ' if bad else 'all rounds byte-identical'} "
+        f"({n} artifacts a run).",
+        "",
+    ]
     return "\n".join(lines)

@@ -6,6 +6,7 @@ a second. ``holoflow bench NAME`` runs ``holoflow.bench.NAME``'s main the same w
 Exit codes: 0 ok, 1 a step failed (or verify found damage), 2 a user mistake (one line on stderr),
 130 interrupted.
 """
+
 from __future__ import annotations
 
 import sys
@@ -40,8 +41,11 @@ def main(argv: list[str] | None = None) -> int:
         import difflib
 
         close = difflib.get_close_matches(name, COMMANDS, n=1)
-        return fail(f"unknown command '{name}'" + (f" (did you mean '{close[0]}'?)" if close else "")
-                    + f"; fix: use one of: {', '.join(COMMANDS)}")
+        return fail(
+            f"unknown command '{name}'"
+            + (f" (did you mean '{close[0]}'?)" if close else "")
+            + f"; fix: use one of: {', '.join(COMMANDS)}"
+        )
     module = COMMANDS[name][0]
     if name == "bench":
         if not rest or rest[0].startswith("-"):
@@ -54,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         return dispatch(module, name, rest)
     except (PipelineError, StoreError) as e:
         return fail(str(e))
-    except OSError as e:        # the store's disk is full or read-only: one line, not a traceback
+    except OSError as e:  # the store's disk is full or read-only: one line, not a traceback
         from holoflow.flow.executors.failure import store_problem
 
         if (why := store_problem(e)) is None:
@@ -69,9 +73,16 @@ def main(argv: list[str] | None = None) -> int:
 
 def usage() -> str:
     width = max(map(len, COMMANDS))
-    return "\n".join(["usage: holoflow COMMAND [ARGS...]  (holoflow COMMAND -h for its flags)", "",
-                      "Text prompt -> 3D Gaussian Splatting scene, as a DAG of stage-cached steps (docs/cli.md).",
-                      "", "commands:"] + [f"  {n:<{width}}  {h}" for n, (_, h) in COMMANDS.items()])
+    return "\n".join(
+        [
+            "usage: holoflow COMMAND [ARGS...]  (holoflow COMMAND -h for its flags)",
+            "",
+            "Text prompt -> 3D Gaussian Splatting scene, as a DAG of stage-cached steps (docs/cli.md).",
+            "",
+            "commands:",
+        ]
+        + [f"  {n:<{width}}  {h}" for n, (_, h) in COMMANDS.items()]
+    )
 
 
 def fail(msg: str, code: int = 2) -> int:
@@ -87,8 +98,7 @@ def dispatch(module: str, name: str, argv: list[str]) -> int:
         mod = importlib.import_module(module)
     except ModuleNotFoundError as e:
         if e.name and module.startswith(e.name):
-            return fail(f"`holoflow {name}` is not available: module {module} is not installed in this "
-                        f"checkout")
+            return fail(f"`holoflow {name}` is not available: module {module} is not installed in this checkout")
         raise
     if not hasattr(mod, "main"):
         return fail(f"`holoflow {name}`: {module} has no main(argv)")

@@ -1,4 +1,5 @@
 """`holoflow dag [--mermaid]`: the pipeline's DAG as text, or as a mermaid flowchart."""
+
 from __future__ import annotations
 
 from holoflow.commands.options import common, parser

@@ -1,12 +1,13 @@
 """``holoflow eval``: scoring reconstructions, in two modes with their own flags (``--help`` of each lists them):
 
-  holoflow eval run RUN [--truth DIR] ...   one finished run (an id or 'latest', a photo's included) where a
-                                            viewer looks, against a truth set when given
-                                            (holoflow.commands.evaluate_run); also: holoflow eval --run RUN
-  holoflow eval scenes [PROMPT ...] ...     procedural scenes, the full method and the paper's ablations: the
-                                            paper's tables (holoflow.commands.evaluate_scenes); also:
-                                            holoflow eval [PROMPT ...]
+holoflow eval run RUN [--truth DIR] ...   one finished run (an id or 'latest', a photo's included) where a
+                                          viewer looks, against a truth set when given
+                                          (holoflow.commands.evaluate_run); also: holoflow eval --run RUN
+holoflow eval scenes [PROMPT ...] ...     procedural scenes, the full method and the paper's ablations: the
+                                          paper's tables (holoflow.commands.evaluate_scenes); also:
+                                          holoflow eval [PROMPT ...]
 """
+
 from __future__ import annotations
 
 

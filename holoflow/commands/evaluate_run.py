@@ -13,6 +13,7 @@ scene or a user's own panorama given by ``--use base_pano=FILE``) where a viewer
 Writes every number as JSON (``viewing.json``, ``truth-<set>.json``) and the pictures into ``--out``
 (default: the run's own folder in the store, ``runs/<id>/eval/``), and prints where.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -23,21 +24,34 @@ from pathlib import Path
 
 
 def parser(prog: str = "holoflow eval run") -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0],
-                                epilog="Procedural prompts and the paper's tables: `holoflow eval scenes`.")
+    p = argparse.ArgumentParser(
+        prog=prog,
+        description=__doc__.split("\n\n")[0],
+        epilog="Procedural prompts and the paper's tables: `holoflow eval scenes`.",
+    )
     p.add_argument("run", nargs="?", default=None, help="run id or 'latest'")
     p.add_argument("--run", dest="run_flag", default=None, metavar="RUN", help="the same as the positional RUN")
-    p.add_argument("--truth", type=Path, default=None, metavar="DIR",
-                   help="truth set folder (cameras.json + views/, docs/truth-sets.md): also score per ring")
+    p.add_argument(
+        "--truth",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="truth set folder (cameras.json + views/, docs/truth-sets.md): also score per ring",
+    )
     p.add_argument("--store", type=Path, default=None, help="store (default $HOLOFLOW_STORE, else artifacts/)")
     p.add_argument("--size", type=int, default=512, help="viewing size, px square (paper 512)")
     p.add_argument("--fov", type=float, default=47.43, help="horizontal field of view, deg (paper 47.43)")
-    p.add_argument("--nr-cameras", type=int, default=12,
-                   help="NIQE / BRISQUE at this many seeded non-polar base cameras (0 = all)")
+    p.add_argument(
+        "--nr-cameras", type=int, default=12, help="NIQE / BRISQUE at this many seeded non-polar base cameras (0 = all)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the novel cameras and the NIQE / BRISQUE subset")
     p.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
-    p.add_argument("--out", type=Path, default=None,
-                   help="folder for the JSON and pictures (default: runs/<id>/eval/ in the store)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="folder for the JSON and pictures (default: runs/<id>/eval/ in the store)",
+    )
     p.add_argument("--json", type=Path, default=None, help="also write the viewing-size numbers to this file")
     return p
 
@@ -58,20 +72,31 @@ def main(argv: list[str] | None = None, prog: str = "holoflow eval run") -> int:
     run_id = st.latest_run_id() if want == "latest" else want
     run_dir = st.run_dir(run_id) if run_id else None
     if run_dir is None or not (run_dir / "transfer_opt" / "scene.ply").is_file():
-        print(f"holoflow eval: no finished run {want!r} (with transfer_opt/scene.ply) in {st.root}; "
-              f"runs there: {', '.join(st.run_ids()[-5:]) or 'none'}", file=sys.stderr)
+        print(
+            f"holoflow eval: no finished run {want!r} (with transfer_opt/scene.ply) in {st.root}; "
+            f"runs there: {', '.join(st.run_ids()[-5:]) or 'none'}",
+            file=sys.stderr,
+        )
         return 2
     out = args.out or run_dir / "eval"
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
     info = st.run_info(run_id) or {}
-    spec = ViewingSpec(size=args.size, fov_deg=args.fov, nr_cameras=args.nr_cameras, seed=args.seed,
-                       backend=args.backend)
+    spec = ViewingSpec(
+        size=args.size, fov_deg=args.fov, nr_cameras=args.nr_cameras, seed=args.seed, backend=args.backend
+    )
     r, _ = score_run(run_dir, info, spec)
-    r.update(run=run_id, prompt=info.get("prompt"), profile=info.get("profile"), engines=depth_engines(run_dir),
-             seconds_total=time.monotonic() - t0)
-    print(f"run {run_id} ({info.get('profile')}), depth made by: "
-          + ", ".join(f"{k}={v}" for k, v in r["engines"].items()))
+    r.update(
+        run=run_id,
+        prompt=info.get("prompt"),
+        profile=info.get("profile"),
+        engines=depth_engines(run_dir),
+        seconds_total=time.monotonic() - t0,
+    )
+    print(
+        f"run {run_id} ({info.get('profile')}), depth made by: "
+        + ", ".join(f"{k}={v}" for k, v in r["engines"].items())
+    )
     print("\n".join(table(r, info.get("profile"))))
     print(f"scored in {r['seconds_total']:.1f} s")
     written = [out / "viewing.json"]

@@ -1,4 +1,5 @@
 """`holoflow gc [--yes]`: delete what the latest and pinned runs do not need (a dry run unless --yes)."""
+
 from __future__ import annotations
 
 import sys
@@ -21,8 +22,10 @@ def main(argv: list[str]) -> int:
         plan = store.gc_plan()
         mb = plan["bytes"] / 2**20
         verb = "deleted" if args.yes else "would delete"
-        print(f"holoflow gc: {verb} {len(plan['runs'])} runs, {len(plan['keys'])} step records, "
-              f"{len(plan['objects'])} objects ({mb:.1f} MiB); kept runs: {', '.join(plan['kept_runs']) or '-'}")
+        print(
+            f"holoflow gc: {verb} {len(plan['runs'])} runs, {len(plan['keys'])} step records, "
+            f"{len(plan['objects'])} objects ({mb:.1f} MiB); kept runs: {', '.join(plan['kept_runs']) or '-'}"
+        )
         if args.yes:
             store.gc_apply(plan)
         elif plan["objects"] or plan["runs"]:

@@ -5,6 +5,7 @@ provenance and convention attributes included), per-channel min / max / mean ove
 NaN / +inf / -inf counts. PLY (through plyfile): per element its count and properties; for a vertex
 element with x, y, z the bounding box. Other files: size and sha256.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -50,7 +51,7 @@ def inspect_exr(path: Path) -> dict[str, Any]:
         raise InspectError(f"{path}: not a readable EXR ({oiio.geterror()})")
     try:
         spec = inp.spec()
-        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")                # [H, W, C]
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")  # [H, W, C]
     finally:
         inp.close()
     if pixels is None:
@@ -65,12 +66,19 @@ def inspect_exr(path: Path) -> dict[str, Any]:
             "min": float(finite.min()) if finite.size else None,
             "max": float(finite.max()) if finite.size else None,
             "mean": float(finite.mean(dtype=np.float64)) if finite.size else None,
-            "nan": int(np.isnan(c).sum()), "posinf": int(np.isposinf(c).sum()),
+            "nan": int(np.isnan(c).sum()),
+            "posinf": int(np.isposinf(c).sum()),
             "neginf": int(np.isneginf(c).sum()),
         }
     attrs = {a.name: _plain(a.value) for a in spec.extra_attribs}
-    return {"path": str(path), "kind": "exr", "width": spec.width, "height": spec.height,
-            "channels": channels, "attributes": attrs}
+    return {
+        "path": str(path),
+        "kind": "exr",
+        "width": spec.width,
+        "height": spec.height,
+        "channels": channels,
+        "attributes": attrs,
+    }
 
 
 def inspect_ply(path: Path) -> dict[str, Any]:
@@ -84,18 +92,25 @@ def inspect_ply(path: Path) -> dict[str, Any]:
         raise InspectError(f"{path}: not a readable PLY ({type(e).__name__}: {e})") from None
     elements = {}
     for el in ply.elements:
-        info: dict[str, Any] = {"count": int(el.count),
-                                "properties": {p.name: str(el.data.dtype[p.name]) for p in el.properties}}
+        info: dict[str, Any] = {
+            "count": int(el.count),
+            "properties": {p.name: str(el.data.dtype[p.name]) for p in el.properties},
+        }
         names = set(el.data.dtype.names or ())
         if {"x", "y", "z"} <= names and el.count:
-            xyz = np.stack([el.data[k].astype(np.float64) for k in "xyz"], axis=1)   # [N, 3]
+            xyz = np.stack([el.data[k].astype(np.float64) for k in "xyz"], axis=1)  # [N, 3]
             ok = np.isfinite(xyz).all(axis=1)
             info["bbox_min"] = xyz[ok].min(axis=0).tolist() if ok.any() else None
             info["bbox_max"] = xyz[ok].max(axis=0).tolist() if ok.any() else None
             info["non_finite"] = int((~ok).sum())
         elements[el.name] = info
-    return {"path": str(path), "kind": "ply", "format": "ascii" if ply.text else "binary",
-            "comments": list(ply.comments), "elements": elements}
+    return {
+        "path": str(path),
+        "kind": "ply",
+        "format": "ascii" if ply.text else "binary",
+        "comments": list(ply.comments),
+        "elements": elements,
+    }
 
 
 def _plain(v: Any) -> Any:
@@ -115,12 +130,15 @@ def format_report(rep: dict[str, Any]) -> str:
         lines.append(f"  EXR {rep['width']} x {rep['height']}, channels {', '.join(rep['channels'])}")
         for k, v in sorted(rep["attributes"].items()):
             lines.append(f"  {k}: {v}")
-        lines.append(f"  {'channel':<8} {'type':<6} {'min':>12} {'max':>12} {'mean':>12} {'nan':>6} "
-                     f"{'+inf':>6} {'-inf':>6}")
+        lines.append(
+            f"  {'channel':<8} {'type':<6} {'min':>12} {'max':>12} {'mean':>12} {'nan':>6} {'+inf':>6} {'-inf':>6}"
+        )
         for name, c in rep["channels"].items():
             f = [("-" if c[k] is None else f"{c[k]:.6g}") for k in ("min", "max", "mean")]
-            lines.append(f"  {name:<8} {c['type']:<6} {f[0]:>12} {f[1]:>12} {f[2]:>12} {c['nan']:>6} "
-                         f"{c['posinf']:>6} {c['neginf']:>6}")
+            lines.append(
+                f"  {name:<8} {c['type']:<6} {f[0]:>12} {f[1]:>12} {f[2]:>12} {c['nan']:>6} "
+                f"{c['posinf']:>6} {c['neginf']:>6}"
+            )
     elif rep["kind"] == "ply":
         lines.append(f"  PLY ({rep['format']})" + (f", comments: {rep['comments']}" if rep["comments"] else ""))
         for name, el in rep["elements"].items():
@@ -154,8 +172,10 @@ def main(argv: list[str]) -> int:
         else:
             pipe, store = load(args)
             if args.target not in pipe.stages:
-                return fail(f"{args.target}: neither a file nor a stage; fix: give an EXR/PLY path or one "
-                            f"of: {', '.join(pipe.stages)}")
+                return fail(
+                    f"{args.target}: neither a file nor a stage; fix: give an EXR/PLY path or one "
+                    f"of: {', '.join(pipe.stages)}"
+                )
             step, outputs = stage_outputs(store, args.target)
             if outputs is None:
                 return fail(f"stage '{args.target}' has no recorded outputs; fix: holoflow run first")
@@ -180,6 +200,11 @@ def stage_outputs(store, stage: str):
     if rec is None:
         return ({"how": st["how"], "source": st.get("source")}, st["outputs"]) if st else (None, None)
     prov = rec["provenance"]
-    facts = {"key": rec["key"], **{k: prov.get(k) for k in ("engine", "params", "seed", "device", "wall_s",
-                                                            "peak_rss_mb", "started", "meta", "versions")}}
+    facts = {
+        "key": rec["key"],
+        **{
+            k: prov.get(k)
+            for k in ("engine", "params", "seed", "device", "wall_s", "peak_rss_mb", "started", "meta", "versions")
+        },
+    }
     return facts, rec["outputs"]

@@ -1,4 +1,5 @@
 """`holoflow log STAGE`: print a stage's log from the latest run."""
+
 from __future__ import annotations
 
 import sys

@@ -1,4 +1,5 @@
 """`holoflow pin RUN [--remove]`: keep a run (an id, or ``latest``) through gc."""
+
 from __future__ import annotations
 
 from holoflow.commands.options import common, load, parser

@@ -1,5 +1,6 @@
 """`holoflow run [PROMPT]`: run the pipeline; cached steps are served from the store (docs/cli.md).
 ``--prompts FILE`` runs a batch of scenes over one store (docs/scale.md)."""
+
 from __future__ import annotations
 
 import json

@@ -1,4 +1,5 @@
 """`holoflow status [PROMPT]`: fresh / stale / missing per stage, and why (holoflow/flow/status.py)."""
+
 from __future__ import annotations
 
 import json
@@ -32,7 +33,7 @@ def main(argv: list[str]) -> int:
     from holoflow.flow.executors.step_env import bytes_note
 
     if note := bytes_note(kinds):
-        print(note, file=sys.stderr)              # a note, not a row of the table
+        print(note, file=sys.stderr)  # a note, not a row of the table
     return 0
 
 

@@ -1,4 +1,5 @@
 """`holoflow verify`: rehash every object of the store; quarantine and report damage (exit 1)."""
+
 from __future__ import annotations
 
 import sys

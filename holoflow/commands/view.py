@@ -14,6 +14,7 @@ above ``--max-splats`` are subsampled (uniformly, seeded) with a message. Ctrl-C
 exits 0. A port in use, or a target that is not a scene, ends with one line on stderr and exit code 2.
 viser (its web client ships in the wheel: no network) is imported only here, never at CLI start-up.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 SCENE_FILES = {"transfer_opt": "scene.ply", "pre_opt": "gaussians.ply"}
-IMAGE_MAX = 256          # frustum images are downsampled to at most this many pixels on the long side
+IMAGE_MAX = 256  # frustum images are downsampled to at most this many pixels on the long side
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 
 
@@ -42,6 +43,7 @@ class ViewError(Exception):
 class Layers:
     """What to show: the scene PLY and, when it comes from a run, that run's other artifacts
     (name -> path; only those that exist)."""
+
     scene: Path
     extras: dict[str, Path] = field(default_factory=dict)
 
@@ -54,12 +56,13 @@ def resolve(target: str | None, store: Path) -> Layers:
     if target is None or target in SCENE_FILES:
         stage = target or stage
         if not (store / "latest").exists():
-            raise ViewError(f"no run in the store {store}: run `holoflow run` first, or give --store, a RUN "
-                            f"folder or a FILE.ply")
+            raise ViewError(
+                f"no run in the store {store}: run `holoflow run` first, or give --store, a RUN folder or a FILE.ply"
+            )
         run = (store / "latest").resolve()
     elif Path(target).is_dir():
         run = Path(target).resolve()
-        if run.name in SCENE_FILES:                                         # a stage's folder
+        if run.name in SCENE_FILES:  # a stage's folder
             stage, run = run.name, run.parent
     elif (store / "runs" / target).is_dir():
         run = (store / "runs" / target).resolve()
@@ -68,10 +71,14 @@ def resolve(target: str | None, store: Path) -> Layers:
     scene = run / stage / SCENE_FILES[stage]
     if not scene.is_file():
         raise ViewError(f"{run} has no {stage}/{scene.name}: not a finished run (run `holoflow run`)")
-    extras = {"G0": run / "pre_opt" / "gaussians.ply", "P_f": run / "point_cloud" / "pf.ply",
-              "P_s": run / "point_cloud" / "ps.ply", "base cameras": run / "pano_set",
-              "supplementary cameras": run / ("inp_set" if (run / "inp_set").is_dir() else "pcd_set"),
-              "panorama sphere": run / "detail" / "pano.exr"}
+    extras = {
+        "G0": run / "pre_opt" / "gaussians.ply",
+        "P_f": run / "point_cloud" / "pf.ply",
+        "P_s": run / "point_cloud" / "ps.ply",
+        "base cameras": run / "pano_set",
+        "supplementary cameras": run / ("inp_set" if (run / "inp_set").is_dir() else "pcd_set"),
+        "panorama sphere": run / "detail" / "pano.exr",
+    }
     return Layers(scene=scene, extras={k: v for k, v in extras.items() if v.exists() and v != scene})
 
 
@@ -99,10 +106,14 @@ def load_splats(path: Path, cap: int) -> dict:
     keep = subsample(len(s), cap, path.name)
     if keep is not None:
         s = s.subset(keep)
-    R = quat_to_rotmat(torch.from_numpy(s.quats)).numpy()                  # [N, 3, 3]
-    cov = (R * s.scales[:, None, :] ** 2) @ R.transpose(0, 2, 1)           # [N, 3, 3]
-    return {"centers": s.means.astype(np.float32), "covariances": cov.astype(np.float32),
-            "rgbs": np.clip(s.rgb, 0, 1).astype(np.float32), "opacities": s.opacities[:, None].astype(np.float32)}
+    R = quat_to_rotmat(torch.from_numpy(s.quats)).numpy()  # [N, 3, 3]
+    cov = (R * s.scales[:, None, :] ** 2) @ R.transpose(0, 2, 1)  # [N, 3, 3]
+    return {
+        "centers": s.means.astype(np.float32),
+        "covariances": cov.astype(np.float32),
+        "rgbs": np.clip(s.rgb, 0, 1).astype(np.float32),
+        "opacities": s.opacities[:, None].astype(np.float32),
+    }
 
 
 def port_free(host: str, port: int) -> bool:
@@ -123,14 +134,14 @@ def build(server, layers: Layers, splats: dict, cap: int) -> tuple[float, dict[s
     from holoflow.io.ply import read_points
 
     scene = server.scene
-    scene.set_up_direction("-y")                                            # holoflow's up is -y
+    scene.set_up_direction("-y")  # holoflow's up is -y
     radius = float(np.quantile(np.linalg.norm(splats["centers"], axis=1), 0.9)) if len(splats["centers"]) else 1.0
     handles = {"scene": [scene.add_gaussian_splats("/scene", **splats)]}
     for name, path in layers.extras.items():
         if name == "G0":
             nodes = [scene.add_gaussian_splats("/G0", **load_splats(path, cap), visible=False)]
         elif name in ("P_f", "P_s"):
-            xyz, rgb = read_points(path)                                    # [N, 3] m, [N, 3] uint8
+            xyz, rgb = read_points(path)  # [N, 3] m, [N, 3] uint8
             keep = subsample(len(xyz), cap, path.name)
             if keep is not None:
                 xyz, rgb = xyz[keep], rgb[keep]
@@ -150,16 +161,27 @@ def add_frustums(scene, folder: Path, kind: str, size: float) -> list:
     from holoflow.io.exr import read_rgb
 
     cams = json.loads((folder / "cameras.json").read_text())
-    fov = 2 * np.arctan(cams["height"] / (2 * cams["fy"]))                  # vertical, radians
+    fov = 2 * np.arctan(cams["height"] / (2 * cams["fy"]))  # vertical, radians
     step = max(1, -(-max(cams["width"], cams["height"]) // IMAGE_MAX))
     nodes = []
     for i, v in enumerate(cams["views"]):
         c2w = np.linalg.inv(np.array(v["viewmat"], np.float64).reshape(4, 4))  # camera-to-world, OpenCV
         image = linear_to_uint8(read_rgb(folder / v["file"])[::step, ::step])
-        nodes.append(scene.add_camera_frustum(
-            f"/cameras/{kind}/{i:03d}", fov=float(fov), aspect=cams["width"] / cams["height"], scale=size,
-            thickness=1.5, thickness_units="screen", image=image, wxyz=rotmat_to_wxyz(c2w[:3, :3]),
-            position=c2w[:3, 3], color=(230, 120, 20) if kind == "base" else (40, 120, 230), visible=False))
+        nodes.append(
+            scene.add_camera_frustum(
+                f"/cameras/{kind}/{i:03d}",
+                fov=float(fov),
+                aspect=cams["width"] / cams["height"],
+                scale=size,
+                thickness=1.5,
+                thickness_units="screen",
+                image=image,
+                wxyz=rotmat_to_wxyz(c2w[:3, :3]),
+                position=c2w[:3, 3],
+                color=(230, 120, 20) if kind == "base" else (40, 120, 230),
+                visible=False,
+            )
+        )
     return nodes
 
 
@@ -183,7 +205,7 @@ def add_pano_sphere(scene, pano: Path, radius: float):
     from holoflow.imageops.color import linear_to_uint8
     from holoflow.io.exr import read_rgb
 
-    rgb = torch.from_numpy(read_rgb(pano)).double()                         # [H, W, 3] linear
+    rgb = torch.from_numpy(read_rgb(pano)).double()  # [H, W, 3] linear
     rgb, _ = resample_rgbd(rgb, torch.ones(rgb.shape[:2], dtype=torch.float64), min(512, rgb.shape[1]))
     v, c, f = rgbd_mesh(rgb.numpy(), np.full(rgb.shape[:2], radius), sky="omit")
     mesh = trimesh.Trimesh(v, f, vertex_colors=linear_to_uint8(c), process=False)
@@ -209,6 +231,7 @@ def add_gui(server, handles: dict[str, list]) -> None:
         def toggle(_event, nodes=nodes, box=box) -> None:
             for node in nodes:
                 node.visible = box.value
+
         box.on_update(toggle)
     button = server.gui.add_button("Look around")
 
@@ -225,23 +248,24 @@ def serve(layers: Layers, splats: dict, host: str, port: int, cap: int) -> None:
         import viser
     except ModuleNotFoundError:
         raise ViewError("viser is not installed: pip install -e '.[view]'") from None
-    for sig in (signal.SIGINT, signal.SIGTERM):     # Ctrl-C and `kill` stop it, even where SIGINT was ignored
+    for sig in (signal.SIGINT, signal.SIGTERM):  # Ctrl-C and `kill` stop it, even where SIGINT was ignored
         signal.signal(sig, _interrupt)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     try:
-        if port and server.get_port() != port:                              # viser moves on to the next free port
+        if port and server.get_port() != port:  # viser moves on to the next free port
             raise ViewError(f"port {port} on {host} is in use: pick another with --port")
         radius, handles = build(server, layers, splats, cap)
-        server.initial_camera.position = (0.0, 0.0, -0.05 * radius)          # at the centre, looking forward (+z)
+        server.initial_camera.position = (0.0, 0.0, -0.05 * radius)  # at the centre, looking forward (+z)
         server.initial_camera.look_at = (0.0, 0.0, 1.0)
         server.initial_camera.up = (0.0, -1.0, 0.0)
         add_gui(server, handles)
         if host not in LOCAL_HOSTS:
-            print(f"holoflow view: listening on {host}: anyone who can reach port {server.get_port()} sees this "
-                  f"scene", flush=True)
+            print(
+                f"holoflow view: listening on {host}: anyone who can reach port {server.get_port()} sees this scene",
+                flush=True,
+            )
         url_host = socket.gethostname() if host in ("0.0.0.0", "::") else host
-        print(f"holoflow view: {layers.scene} at http://{url_host}:{server.get_port()}/  (Ctrl-C stops)",
-              flush=True)
+        print(f"holoflow view: {layers.scene} at http://{url_host}:{server.get_port()}/  (Ctrl-C stops)", flush=True)
         while True:
             time.sleep(0.5)
     finally:
@@ -254,12 +278,19 @@ def _interrupt(_signum, _frame) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="holoflow view", description=__doc__.split("\n\n")[0])
-    p.add_argument("target", nargs="?", help="RUN (id or folder), STAGE (transfer_opt | pre_opt) or FILE.ply; "
-                   "default: the store's latest run")
+    p.add_argument(
+        "target",
+        nargs="?",
+        help="RUN (id or folder), STAGE (transfer_opt | pre_opt) or FILE.ply; default: the store's latest run",
+    )
     p.add_argument("--pipeline", default="pipeline.yaml", help="pipeline file; its folder holds the default store")
     p.add_argument("--store", help="store folder (default $HOLOFLOW_STORE, else artifacts/ beside the pipeline)")
-    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine "
-                   "only; 0.0.0.0 shares the scene with everyone who can reach the port)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on (default 127.0.0.1: this machine "
+        "only; 0.0.0.0 shares the scene with everyone who can reach the port)",
+    )
     p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0 = any free port)")
     p.add_argument("--max-splats", type=int, default=1_000_000, help="subsample larger layers to this many")
     args = p.parse_args(argv)

@@ -5,6 +5,7 @@ is finite and > 0 (sky, +inf in the truth, is excluded) and ``mask`` (if given) 
 non-finite or non-positive depth on a scored pixel is a *miss*: it counts against delta1 and coverage
 and is left out of AbsRel / RMSE, whose values would otherwise be infinite.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -30,12 +31,13 @@ def depth_metrics(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray | None =
     n = int(keep.sum())
     out = {"n": n, "sky_false": float((np.isfinite(pred) & sky).sum() / max(int(sky.sum()), 1))}
     if n == 0:
-        return {**out, "abs_rel": float("nan"), "rmse": float("nan"), "delta1": float("nan"),
-                "coverage": float("nan")}
+        return {**out, "abs_rel": float("nan"), "rmse": float("nan"), "delta1": float("nan"), "coverage": float("nan")}
     p, t = pred[hit], truth[hit]
     ratio = np.maximum(p / t, t / p) if p.size else np.zeros(0)
-    return {**out,
-            "abs_rel": float(np.mean(np.abs(p - t) / t)) if p.size else float("nan"),
-            "rmse": float(np.sqrt(np.mean((p - t) ** 2))) if p.size else float("nan"),
-            "delta1": float((ratio < 1.25).sum() / n),
-            "coverage": float(hit.sum() / n)}
+    return {
+        **out,
+        "abs_rel": float(np.mean(np.abs(p - t) / t)) if p.size else float("nan"),
+        "rmse": float(np.sqrt(np.mean((p - t) ** 2))) if p.size else float("nan"),
+        "delta1": float((ratio < 1.25).sum() / n),
+        "coverage": float(hit.sum() / n),
+    }

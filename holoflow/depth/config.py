@@ -2,16 +2,21 @@
 
 A depth engine's own parameters are fields here whose doc names the engine (``model`` for
 depth_anything / zoedepth); the engine reads them from the ``cfg`` it is given."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from holoflow.flow.params import Engines, StageParams, param
 
-_FACES = ("(images: [F, h, w, 3] linear, dirs: [F, h, w, 3], cos: [F, h, w], truth_radial: [F, h, w] m | None,"
-          " seed, cfg: {cls}, device: str, progress, pano: [H, W, 3] linear)")
-_AUTO = {"auto": "simulated on a procedural scene's truth, given on an imported Z, else depth_anything where its "
-                 "weights are on the machine (tangent_depth), else layout (holoflow.depth.engines.resolve_engine)"}
+_FACES = (
+    "(images: [F, h, w, 3] linear, dirs: [F, h, w, 3], cos: [F, h, w], truth_radial: [F, h, w] m | None,"
+    " seed, cfg: {cls}, device: str, progress, pano: [H, W, 3] linear)"
+)
+_AUTO = {
+    "auto": "simulated on a procedural scene's truth, given on an imported Z, else depth_anything where its "
+    "weights are on the machine (tangent_depth), else layout (holoflow.depth.engines.resolve_engine)"
+}
 
 
 def _camera_height():
@@ -21,8 +26,11 @@ def _camera_height():
 
 def _scene():
     """The layout engine's scene kind: one field of both depth stages."""
-    return param("auto", "layout: room layout (indoor), ground / vertical / sky (outdoor), or decided "
-                 "from the image (auto)", choices=("auto", "indoor", "outdoor"))
+    return param(
+        "auto",
+        "layout: room layout (indoor), ground / vertical / sky (outdoor), or decided from the image (auto)",
+        choices=("auto", "indoor", "outdoor"),
+    )
 
 
 @dataclass(frozen=True)
@@ -37,24 +45,32 @@ class TangentDepthParams(StageParams):
         given="holoflow.depth.engines:given_relative_engine",
         prior="holoflow.depth.engines:prior_relative_engine",
         layout="holoflow.depth.engines:layout_relative_engine",
-        depth_anything="holoflow.depth.engines:depth_anything_engine")
+        depth_anything="holoflow.depth.engines:depth_anything_engine",
+    )
 
     width: int = param(1024, "panorama downsampled to this width (paper 4096)", "px", ge=2)
     face_size: int = param(256, "tangent image side", "px", ge=2)
-    padding: float = param(1.0, "gnomonic padding of each icosahedron triangle (wide overlaps)",
-                           "tangent-plane units", ge=0)
-    align: str = param("grid", "per-face alignment: median (naive), affine (1 scale+offset), grid",
-                       choices=("median", "affine", "grid"))
-    grid: tuple[int, int] = param((8, 7), "alignment grid (cols, rows) of scale/offset nodes per face",
-                                  "nodes", ge=1)
+    padding: float = param(
+        1.0, "gnomonic padding of each icosahedron triangle (wide overlaps)", "tangent-plane units", ge=0
+    )
+    align: str = param(
+        "grid",
+        "per-face alignment: median (naive), affine (1 scale+offset), grid",
+        choices=("median", "affine", "grid"),
+    )
+    grid: tuple[int, int] = param((8, 7), "alignment grid (cols, rows) of scale/offset nodes per face", "nodes", ge=1)
     smoothness: float = param(1.0, "weight of the node-to-node smoothness term (docs/depth.md)", ge=0)
-    scale_reg: float = param(0.001, "weight pulling nodes to the face's affine solution (no collapse to 0)",
-                             ge=0)
-    blend_ramp: float = param(0.1, "faces blend with weights falling to 0 over this outer fraction of the "
-                              "half-size", gt=0, le=1)
+    scale_reg: float = param(0.001, "weight pulling nodes to the face's affine solution (no collapse to 0)", ge=0)
+    blend_ramp: float = param(
+        0.1, "faces blend with weights falling to 0 over this outer fraction of the half-size", gt=0, le=1
+    )
     model: str = param("", "depth_anything: local dir or model id in the user's cache")
-    net_size: int = param(0, "depth_anything: side of the square image the network sees (rounded to a multiple "
-                          "of 14); 0 = the face size", "px", ge=0)
+    net_size: int = param(
+        0,
+        "depth_anything: side of the square image the network sees (rounded to a multiple of 14); 0 = the face size",
+        "px",
+        ge=0,
+    )
     net_batch: int = param(4, "depth_anything: faces per forward pass", "faces", ge=1)
     camera_height: float = _camera_height()
     scene: str = _scene()
@@ -76,7 +92,8 @@ class MetricAlignParams(StageParams):
         given="holoflow.depth.engines:given_metric_engine",
         prior="holoflow.depth.engines:prior_metric_engine",
         layout="holoflow.depth.engines:layout_metric_engine",
-        zoedepth="holoflow.depth.engines:zoedepth_engine")
+        zoedepth="holoflow.depth.engines:zoedepth_engine",
+    )
 
     faces: int = param(6, "number of tangent faces given metric depth (seeded random subset)", ge=1, le=20)
     face_size: int = param(256, "tangent face side for the metric engine", "px", ge=2)

@@ -25,6 +25,7 @@ Engines (registered by name in holoflow/depth/config.py; docs/depth.md says what
 ``depth_anything`` / ``zoedepth``: the networks through holoflow.networks (real weights).
 ``auto`` (the default): ``resolve_engine``'s rule, which also says which engine ran and why.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,10 +34,10 @@ from holoflow.stage import Progress
 
 #: simulated relative engine; sizes are fractions of the face side so any face size behaves alike
 SIM_RELATIVE = {
-    "edge_blur": 0.01,        # Gaussian sigma of the edge mixing, fraction of the face side
-    "bias_std": 0.13,         # std of the log bias field (multiplicative, smooth)
-    "bias_cycles": 1.2,       # max spatial frequency of the bias field, cycles per face side
-    "noise_std": 0.04,        # std of the multiplicative pixel noise
+    "edge_blur": 0.01,  # Gaussian sigma of the edge mixing, fraction of the face side
+    "bias_std": 0.13,  # std of the log bias field (multiplicative, smooth)
+    "bias_cycles": 1.2,  # max spatial frequency of the bias field, cycles per face side
+    "noise_std": 0.04,  # std of the multiplicative pixel noise
     "scale_range": (0.3, 3.0),  # per-face scale, log-uniform
     "shift_range": (0.0, 0.5),  # per-face shift, fraction of the face's median scaled disparity
 }
@@ -76,8 +77,9 @@ def _channel_names(header: dict) -> list[str]:
     return [getattr(c, "name", str(c)) for c in header.get("channels", [])]
 
 
-def resolve_engine(engine: str, has_truth: bool, *, source: str | None = None, network: str = "",
-                   metric: bool = False) -> tuple[str, str]:
+def resolve_engine(
+    engine: str, has_truth: bool, *, source: str | None = None, network: str = "", metric: bool = False
+) -> tuple[str, str]:
     """The engine that runs for ``engine`` and why, in one line for the step's output, record and status.
 
     ``auto``, in this order: a truth depth written by the procedural scene (``source`` "procedural", or
@@ -89,25 +91,29 @@ def resolve_engine(engine: str, has_truth: bool, *, source: str | None = None, n
     if engine != "auto":
         return engine, f"engine {engine!r} was chosen explicitly"
     if has_truth and source in (None, "procedural"):
-        return "simulated", ("auto: the input carries a procedural scene's truth depth (Z), so the calibrated "
-                             "simulation runs")
+        return "simulated", (
+            "auto: the input carries a procedural scene's truth depth (Z), so the calibrated simulation runs"
+        )
     if has_truth:
         return "given", "auto: the imported panorama has a Z channel (radial depth), which is kept as the depth"
     if metric:
-        return "layout", ("auto: no truth depth; metric scale from the layout engine's camera-height rule (eye "
-                          "camera_height above the floor); a metric network runs only by name (engine zoedepth)")
+        return "layout", (
+            "auto: no truth depth; metric scale from the layout engine's camera-height rule (eye "
+            "camera_height above the floor); a metric network runs only by name (engine zoedepth)"
+        )
     if network:
         from holoflow.networks.weights import describe
 
         what = describe(network) or "Depth Anything"
         return "depth_anything", f"auto: relative depth from the network found locally ({what}) at {network}"
-    return "layout", ("auto: no truth depth and no depth network on this machine, so the image-driven layout "
-                      "estimator runs; `holoflow models pull` fetches Depth Anything V2 Small (24.8 M parameters, "
-                      "Apache-2.0)")
+    return "layout", (
+        "auto: no truth depth and no depth network on this machine, so the image-driven layout "
+        "estimator runs; `holoflow models pull` fetches Depth Anything V2 Small (24.8 M parameters, "
+        "Apache-2.0)"
+    )
 
 
-def simulated_relative(radial: np.ndarray, cos: np.ndarray, seed: int,
-                       params: dict | None = None) -> np.ndarray:
+def simulated_relative(radial: np.ndarray, cos: np.ndarray, seed: int, params: dict | None = None) -> np.ndarray:
     """SIMULATION of a relative-depth network: face disparities [F, h, w] from truth.
 
     ``radial`` [F, h, w]: true radial depth sampled into the faces (metres, +inf sky); ``cos`` [F, h, w]
@@ -172,25 +178,59 @@ def layout_radial_depth(dirs: np.ndarray, layout: dict | None = None) -> np.ndar
 # Relative engines return perspective disparity, metric engines perspective depth z (m, +inf unbounded).
 
 
-def simulated_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                              progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def simulated_relative_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``simulated`` relative engine (SIMULATION from the truth, ``SIM_RELATIVE``)."""
     out = simulated_relative(_need_truth(truth_radial, "depth_anything"), cos, seed)
     _report(progress, len(out))
-    return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_RELATIVE),
-                 "note": "SIMULATED relative depth from the scene truth, not a network"}
+    return out, {
+        "engine": "simulated",
+        "simulation": True,
+        "calibration": dict(SIM_RELATIVE),
+        "note": "SIMULATED relative depth from the scene truth, not a network",
+    }
 
 
-def prior_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                          progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def prior_relative_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``prior`` relative engine: the disparity of the room layout prior (no image content)."""
     _report(progress, len(cos))
     return (1.0 / (layout_radial_depth(dirs) * cos)).astype(np.float32), {
-        "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
+        "engine": "prior",
+        "layout": dict(PRIOR_LAYOUT),
+        "note": "room layout prior from ray direction",
+    }
 
 
-def depth_anything_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                          progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def depth_anything_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``depth_anything`` relative engine (holoflow.networks.depth_anything; weights: ``cfg.model``)."""
     from holoflow.networks import depth_anything
 
@@ -199,44 +239,100 @@ def depth_anything_engine(images, dirs, cos, truth_radial, seed, cfg, device: st
     return np.asarray(out, dtype=np.float32), {"engine": "depth_anything", "model": cfg.model, "net_side": side}
 
 
-def given_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                          progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def given_relative_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``given`` relative engine: the exact perspective disparity 1/z of the given Z (sky 0)."""
     z = _need_given(truth_radial) * cos
     _report(progress, len(z))
     return np.where(np.isfinite(z) & (z > 0), 1.0 / np.where(z > 0, z, 1.0), 0.0).astype(np.float32), {
-        "engine": "given", "note": "the imported panorama's own Z channel"}
+        "engine": "given",
+        "note": "the imported panorama's own Z channel",
+    }
 
 
-def given_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                        progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def given_metric_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``given`` metric engine: the perspective depth z of the given Z (metres, +inf sky). The
     metric_align stage keeps the given Z itself as the depth (stages/metric_align.py)."""
     z = _need_given(truth_radial) * cos
     _report(progress, len(z))
     return np.where(np.isfinite(z) & (z > 0), z, np.inf).astype(np.float32), {
-        "engine": "given", "note": "the imported panorama's own Z channel"}
+        "engine": "given",
+        "note": "the imported panorama's own Z channel",
+    }
 
 
-def simulated_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                            progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def simulated_metric_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``simulated`` metric engine (SIMULATION from the truth, ``SIM_METRIC``)."""
     out = simulated_metric(_need_truth(truth_radial, "zoedepth"), cos, seed)
     _report(progress, len(out))
-    return out, {"engine": "simulated", "simulation": True, "calibration": dict(SIM_METRIC),
-                 "note": "SIMULATED metric depth from the scene truth, not a network"}
+    return out, {
+        "engine": "simulated",
+        "simulation": True,
+        "calibration": dict(SIM_METRIC),
+        "note": "SIMULATED metric depth from the scene truth, not a network",
+    }
 
 
-def prior_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                        progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def prior_metric_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``prior`` metric engine: the z of the room layout prior (no image content)."""
     _report(progress, len(cos))
     return (layout_radial_depth(dirs) * cos).astype(np.float32), {
-        "engine": "prior", "layout": dict(PRIOR_LAYOUT), "note": "room layout prior from ray direction"}
+        "engine": "prior",
+        "layout": dict(PRIOR_LAYOUT),
+        "note": "room layout prior from ray direction",
+    }
 
 
-def zoedepth_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                    progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def zoedepth_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``zoedepth`` metric engine (holoflow.networks.zoedepth; weights: ``cfg.model``)."""
     from holoflow.networks import zoedepth
 
@@ -244,23 +340,47 @@ def zoedepth_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "c
     return np.asarray(out, dtype=np.float32), {"engine": "zoedepth", "model": cfg.model}
 
 
-def layout_relative_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                           progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def layout_relative_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``layout`` relative engine: perspective disparity of the image-driven layout (sky 0)."""
     radial, facts = _layout_radial(pano, dirs, cfg)
     _report(progress, len(cos))
     z = radial * cos
     return np.where(np.isfinite(z) & (z > 0), 1.0 / np.where(z > 0, z, 1.0), 0.0).astype(np.float32), {
-        "engine": "layout", "layout": facts, "note": "image-driven layout estimate (no weights)"}
+        "engine": "layout",
+        "layout": facts,
+        "note": "image-driven layout estimate (no weights)",
+    }
 
 
-def layout_metric_engine(images, dirs, cos, truth_radial, seed, cfg, device: str = "cpu",
-                         progress: Progress = None, pano: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def layout_metric_engine(
+    images,
+    dirs,
+    cos,
+    truth_radial,
+    seed,
+    cfg,
+    device: str = "cpu",
+    progress: Progress = None,
+    pano: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict]:
     """``layout`` metric engine: perspective depth z of the image-driven layout (+inf sky), metres."""
     radial, facts = _layout_radial(pano, dirs, cfg)
     _report(progress, len(cos))
     return (radial * cos).astype(np.float32), {
-        "engine": "layout", "layout": facts, "note": "image-driven layout estimate (no weights)"}
+        "engine": "layout",
+        "layout": facts,
+        "note": "image-driven layout estimate (no weights)",
+    }
 
 
 def _layout_radial(pano, dirs: np.ndarray, cfg) -> tuple[np.ndarray, dict]:
@@ -275,15 +395,20 @@ def _layout_radial(pano, dirs: np.ndarray, cfg) -> tuple[np.ndarray, dict]:
         raise ValueError("engine 'layout' needs the panorama image")
     est = estimate_layout_depth(pano, LayoutConfig(camera_height=cfg.camera_height, scene=cfg.scene))
     disp = np.where(np.isfinite(est.depth), 1.0 / np.maximum(est.depth, 1e-6), 0.0)  # [H, W], sky 0
-    d = sample_equirect(torch.from_numpy(disp[None].astype(np.float64)),
-                        torch.from_numpy(np.asarray(dirs, dtype=np.float64)), mode="nearest")[:, 0].numpy()
+    d = sample_equirect(
+        torch.from_numpy(disp[None].astype(np.float64)),
+        torch.from_numpy(np.asarray(dirs, dtype=np.float64)),
+        mode="nearest",
+    )[:, 0].numpy()
     return np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.inf), est.facts
 
 
 def _need_truth(truth_radial: np.ndarray | None, network: str) -> np.ndarray:
     if truth_radial is None:
-        raise ValueError("engine 'simulated' needs the truth depth (a Z channel in the truth "
-                         f"panorama); use engine 'prior' or '{network}' for a panorama without one")
+        raise ValueError(
+            "engine 'simulated' needs the truth depth (a Z channel in the truth "
+            f"panorama); use engine 'prior' or '{network}' for a panorama without one"
+        )
     return truth_radial
 
 

@@ -20,6 +20,7 @@ Data residuals are reweighted (Huber IRLS) so that edge-mixed pixels do not drag
 too few valid pixels, or whose fitted scale comes out <= 0, are dropped (weight 0 in the blend) and
 reported in the residuals.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -51,8 +52,14 @@ class Alignment:
     residuals: dict = field(default_factory=dict)
 
 
-def align_faces(disp: np.ndarray, valid: np.ndarray, cos: np.ndarray, overlaps: Overlaps,
-                cfg: TangentDepthParams, robust_iters: int = 3) -> Alignment:
+def align_faces(
+    disp: np.ndarray,
+    valid: np.ndarray,
+    cos: np.ndarray,
+    overlaps: Overlaps,
+    cfg: TangentDepthParams,
+    robust_iters: int = 3,
+) -> Alignment:
     """Align per-face perspective disparities ``disp`` [F, h, w] into radial disparities.
 
     ``valid`` [F, h, w] marks usable pixels (finite engine output; NaN / inf are masked here too);
@@ -77,8 +84,9 @@ def align_faces(disp: np.ndarray, valid: np.ndarray, cos: np.ndarray, overlaps: 
         scale = np.where(face_ok, 1.0 / np.where(med > 0, med, 1.0), 0.0).reshape(F, 1, 1)
         offset = np.zeros((F, 1, 1))
     else:
-        scale, offset = _solve_until_positive(d, valid, overlaps, face_ok, dropped, (1, 1), 0.0, 0.0, None,
-                                              robust_iters)
+        scale, offset = _solve_until_positive(
+            d, valid, overlaps, face_ok, dropped, (1, 1), 0.0, 0.0, None, robust_iters
+        )
         if method == "grid":
             cols, rows = int(grid[0]), int(grid[1])
             if cols < 1 or rows < 1:
@@ -90,15 +98,28 @@ def align_faces(disp: np.ndarray, valid: np.ndarray, cos: np.ndarray, overlaps: 
             typical = np.median(np.abs(pre[valid & face_ok[:, None, None]])) if face_ok.any() else 1.0
             typical = typical if typical > 0 and np.isfinite(typical) else 1.0
             ones = np.ones(len(face_ok))
-            s_g, o_g = _solve_until_positive(pre / typical, valid, overlaps, face_ok, dropped, (cols, rows),
-                                             smoothness, scale_reg, (ones, 0 * ones), robust_iters)
+            s_g, o_g = _solve_until_positive(
+                pre / typical,
+                valid,
+                overlaps,
+                face_ok,
+                dropped,
+                (cols, rows),
+                smoothness,
+                scale_reg,
+                (ones, 0 * ones),
+                robust_iters,
+            )
             scale, offset = s_g * s_a, s_g * o_a + typical * o_g  # compose: nodes act on d directly
     s_map, o_map = _grid_maps(scale, h, w), _grid_maps(offset, h, w)  # [F, h, w]
     radial = cos * (s_map * d + o_map)
     radial = np.where(valid & face_ok[:, None, None], radial, np.nan)
     res = _residual_report(radial, overlaps, valid & face_ok[:, None, None])
-    res.update(method=method, grid=[int(scale.shape[2]), int(scale.shape[1])],
-               dropped_faces={str(k): v for k, v in sorted(dropped.items())})
+    res.update(
+        method=method,
+        grid=[int(scale.shape[2]), int(scale.shape[1])],
+        dropped_faces={str(k): v for k, v in sorted(dropped.items())},
+    )
     return Alignment(radial, scale, offset, norm, face_ok, res)
 
 
@@ -140,8 +161,7 @@ def _grid_maps(nodes: np.ndarray, h: int, w: int) -> np.ndarray:
     return (flat[:, idx] * wts[None]).sum(-1).reshape(F, h, w)
 
 
-def _solve_until_positive(d, valid, overlaps, face_ok, dropped, grid, smoothness, scale_reg, prior,
-                          robust_iters):
+def _solve_until_positive(d, valid, overlaps, face_ok, dropped, grid, smoothness, scale_reg, prior, robust_iters):
     """Solve; drop faces whose mean scale is <= 0 and solve again until none is (face_ok updated)."""
     while True:
         scale, offset = _solve(d, valid, overlaps, face_ok, grid, smoothness, scale_reg, prior, robust_iters)
@@ -177,11 +197,18 @@ def _solve(d, valid, ov: Overlaps, face_ok, grid, smoothness, scale_reg, prior, 
     nb, wb = _node_taps(ov.x_b[use], ov.y_b[use], h, w, cols, rows)
     P = fa.size
     r_idx = np.repeat(np.arange(P), 16)
-    c_idx = np.concatenate([
-        (fa[:, None] * n_nodes + na), (F * n_nodes + fa[:, None] * n_nodes + na),
-        (fb[:, None] * n_nodes + nb), (F * n_nodes + fb[:, None] * n_nodes + nb)], 1).ravel()
-    vals = np.concatenate([ca[:, None] * wa * da[:, None], ca[:, None] * wa,
-                           -cb[:, None] * wb * db[:, None], -cb[:, None] * wb], 1).ravel()
+    c_idx = np.concatenate(
+        [
+            (fa[:, None] * n_nodes + na),
+            (F * n_nodes + fa[:, None] * n_nodes + na),
+            (fb[:, None] * n_nodes + nb),
+            (F * n_nodes + fb[:, None] * n_nodes + nb),
+        ],
+        1,
+    ).ravel()
+    vals = np.concatenate(
+        [ca[:, None] * wa * da[:, None], ca[:, None] * wa, -cb[:, None] * wb * db[:, None], -cb[:, None] * wb], 1
+    ).ravel()
     side_a = (np.arange(16) < 8)[None].repeat(P, 0).ravel()
     data = sp.csr_matrix((vals, (r_idx, c_idx)), shape=(P, n))
     data_a = sp.csr_matrix((vals * side_a, (r_idx, c_idx)), shape=(P, n))  # D_a alone
@@ -218,7 +245,7 @@ def _solve(d, valid, ov: Overlaps, face_ok, grid, smoothness, scale_reg, prior, 
     wts = np.ones(P)
     x = np.zeros(n)
     for it in range(max(robust_iters, 0) + 1):
-        dw = data.copy()                                                      # rows weighted
+        dw = data.copy()  # rows weighted
         dw.data *= np.repeat(base * wts, np.diff(data.indptr))
         AtA = (dw.T @ dw + RtR).tocsc()
         x = spla.spsolve(AtA, Rtb, permc_spec=PERMC)
@@ -234,10 +261,10 @@ def _solve(d, valid, ov: Overlaps, face_ok, grid, smoothness, scale_reg, prior, 
         k = max(1.5 * 1.4826 * np.median(np.abs(rel)), HUBER_MIN)  # sky pairs agree exactly: MAD can be 0
         huber = np.where(np.abs(rel) <= k, 1.0, np.sqrt(k / np.maximum(np.abs(rel), 1e-300)))
         wts = huber / level
-        wts = wts / np.sqrt(np.mean(wts ** 2))  # the data term keeps its total weight
+        wts = wts / np.sqrt(np.mean(wts**2))  # the data term keeps its total weight
     x = np.where(np.isfinite(x), x, 0.0)
-    scale = x[:F * n_nodes].reshape(F, rows, cols)
-    offset = x[F * n_nodes:].reshape(F, rows, cols)
+    scale = x[: F * n_nodes].reshape(F, rows, cols)
+    offset = x[F * n_nodes :].reshape(F, rows, cols)
     return scale, offset
 
 
@@ -247,8 +274,9 @@ def _smoothness_rows(F: int, cols: int, rows: int):
 
     n_nodes = cols * rows
     ids = np.arange(n_nodes).reshape(rows, cols)
-    pairs = np.concatenate([np.stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()], 1),
-                            np.stack([ids[:-1, :].ravel(), ids[1:, :].ravel()], 1)])
+    pairs = np.concatenate(
+        [np.stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()], 1), np.stack([ids[:-1, :].ravel(), ids[1:, :].ravel()], 1)]
+    )
     blocks = (np.arange(2 * F) * n_nodes)[:, None, None] + pairs[None]  # [2F, E, 2]
     blocks = blocks.reshape(-1, 2)
     E = blocks.shape[0]
@@ -274,8 +302,10 @@ def _residual_report(radial: np.ndarray, ov: Overlaps, ok: np.ndarray) -> dict:
         m = (ov.face_a[use] == f) | (ov.face_b[use] == f)
         if m.any():
             per_face[f"{f:02d}"] = float(np.sqrt(np.mean(r[m] ** 2)) / max(scale, 1e-30))
-    return {"pairs": int(r.size),
-            "rms": float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0,
-            "rel_rms": float(np.sqrt(np.mean(r ** 2)) / max(scale, 1e-30)) if r.size else 0.0,
-            "rel_mean_abs": float(np.mean(np.abs(r)) / max(scale, 1e-30)) if r.size else 0.0,
-            "per_face_rel_rms": per_face}
+    return {
+        "pairs": int(r.size),
+        "rms": float(np.sqrt(np.mean(r**2))) if r.size else 0.0,
+        "rel_rms": float(np.sqrt(np.mean(r**2)) / max(scale, 1e-30)) if r.size else 0.0,
+        "rel_mean_abs": float(np.mean(np.abs(r)) / max(scale, 1e-30)) if r.size else 0.0,
+        "per_face_rel_rms": per_face,
+    }

@@ -5,6 +5,7 @@ centres at +0.5, ``viewmat`` [F, 4, 4] world-to-camera, OpenCV axes. A face pixe
 (x, y) = (col + 0.5, row + 0.5). Its obliquity ``cos`` is the cosine of the angle between its ray and the
 optical axis, so perspective depth z = radial depth * cos, and radial disparity = cos * z-disparity.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -86,14 +87,25 @@ def find_overlaps(K: np.ndarray, viewmat: np.ndarray, h: int, w: int, stride: in
     pix = (rows * w + cols).ravel()  # [n]
     parts: list[tuple] = []
     for i in range(F - 1):
-        xs, ys, cbs = project(dirs[i].reshape(-1, 3)[pix], K[i + 1:], viewmat[i + 1:])  # [F - i - 1, n]
+        xs, ys, cbs = project(dirs[i].reshape(-1, 3)[pix], K[i + 1 :], viewmat[i + 1 :])  # [F - i - 1, n]
         for j in range(i + 1, F):
             x, y, cb = xs[j - i - 1], ys[j - i - 1], cbs[j - i - 1]
             idx, wts, inside = bilinear_taps(x, y, h, w)
             ok = inside & (cb > 1e-6)
             if ok.any():
-                parts.append((np.full(ok.sum(), i), pix[ok], cos[i].ravel()[pix[ok]], np.full(ok.sum(), j),
-                              x[ok], y[ok], idx[ok], wts[ok], cb[ok]))
+                parts.append(
+                    (
+                        np.full(ok.sum(), i),
+                        pix[ok],
+                        cos[i].ravel()[pix[ok]],
+                        np.full(ok.sum(), j),
+                        x[ok],
+                        y[ok],
+                        idx[ok],
+                        wts[ok],
+                        cb[ok],
+                    )
+                )
     if not parts:
         e, f = np.zeros(0, dtype=np.int64), np.zeros(0)
         return Overlaps(e, e, f, e, f, f, np.zeros((0, 4), np.int64), np.zeros((0, 4)), f)

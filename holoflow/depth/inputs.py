@@ -1,4 +1,5 @@
 """Reading the depth stages' inputs: a panorama's RGB, its truth depth (Z), a disparity EXR."""
+
 from __future__ import annotations
 
 from pathlib import Path

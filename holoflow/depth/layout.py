@@ -31,6 +31,7 @@ Metric scale comes from ``camera_height`` alone (1.6 m default, a standing adult
 Everything is computed on a ``work_width`` copy (fast: about a second at 512 x 256) and evaluated
 analytically at the output size.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
@@ -158,7 +159,7 @@ def boundary_dp(cost: np.ndarray, smoothness: float, jump: float) -> np.ndarray:
     path[-1] = int(np.argmin(acc))
     for c in range(n - 1, 0, -1):
         path[c - 1] = back[c, path[c]]
-    return path[pad:pad + W]
+    return path[pad : pad + W]
 
 
 def region_probability(lab: np.ndarray, seed: np.ndarray, other: np.ndarray, bins: int = 12) -> np.ndarray:
@@ -168,8 +169,8 @@ def region_probability(lab: np.ndarray, seed: np.ndarray, other: np.ndarray, bin
     hi = np.array([100.0, 60.0, 60.0])
     q = np.clip(((lab - lo) / (hi - lo) * bins).astype(np.int64), 0, bins - 1)
     idx = (q[..., 0] * bins + q[..., 1]) * bins + q[..., 2]  # [H, W]
-    hs = np.bincount(idx[seed], minlength=bins ** 3).astype(np.float64) + 0.5
-    ho = np.bincount(idx[other], minlength=bins ** 3).astype(np.float64) + 0.5
+    hs = np.bincount(idx[seed], minlength=bins**3).astype(np.float64) + 0.5
+    ho = np.bincount(idx[other], minlength=bins**3).astype(np.float64) + 0.5
     hs /= hs.sum()
     ho /= ho.sum()
     p = hs / (hs + ho)
@@ -197,8 +198,14 @@ def _edges(lab: np.ndarray) -> np.ndarray:
     return np.minimum(d / scale, 1.5)
 
 
-def lower_boundary(prob: np.ndarray, edges: np.ndarray, lat: np.ndarray, cfg: LayoutConfig,
-                   lat_range=(-np.radians(70), -np.radians(1.0)), extra: np.ndarray | None = None) -> np.ndarray:
+def lower_boundary(
+    prob: np.ndarray,
+    edges: np.ndarray,
+    lat: np.ndarray,
+    cfg: LayoutConfig,
+    lat_range=(-np.radians(70), -np.radians(1.0)),
+    extra: np.ndarray | None = None,
+) -> np.ndarray:
     """Row index [W] (first floor row, top-down) of the floor region's upper edge per column.
 
     ``prob`` [H, W] floor probability, ``edges`` [H, W] boundary evidence between rows r-1 and r,
@@ -208,19 +215,25 @@ def lower_boundary(prob: np.ndarray, edges: np.ndarray, lat: np.ndarray, cfg: La
     rows = np.nonzero((lat >= lat_range[0]) & (lat <= lat_range[1]))[0]
     top, bot = rows[0], rows[-1]
     r = np.arange(top, bot + 1)
-    pf = prob[top:bot + 1]  # [K, W]
+    pf = prob[top : bot + 1]  # [K, W]
     nf = 1.0 - pf
     # cost(b) = sum_{rows >= b} (non-floor) + sum_{rows < b, in range} floor-ness - edge(b)
     below = np.cumsum(nf[::-1], axis=0)[::-1]  # [K, W]: rows b..bot
     above = np.concatenate([np.zeros((1, W)), np.cumsum(pf, axis=0)[:-1]], axis=0)  # rows top..b-1
-    ev = edges[top:bot + 1] + (extra[top:bot + 1] if extra is not None else 0.0)
+    ev = edges[top : bot + 1] + (extra[top : bot + 1] if extra is not None else 0.0)
     cost = below + above - cfg.edge_weight * ev
     k = boundary_dp(cost, cfg.smoothness * 10, cfg.jump)
     return r[k]
 
 
-def upper_boundary(prob: np.ndarray, edges: np.ndarray, lat: np.ndarray, cfg: LayoutConfig,
-                   lat_range=(np.radians(1.0), np.radians(70)), extra: np.ndarray | None = None) -> np.ndarray:
+def upper_boundary(
+    prob: np.ndarray,
+    edges: np.ndarray,
+    lat: np.ndarray,
+    cfg: LayoutConfig,
+    lat_range=(np.radians(1.0), np.radians(70)),
+    extra: np.ndarray | None = None,
+) -> np.ndarray:
     """Row index [W] of the first non-ceiling (non-sky) row below the zenith region, per column."""
     H = prob.shape[0]
     flip = lambda a: a[::-1]  # noqa: E731 - mirror rows so the upper problem is the lower one
@@ -235,8 +248,9 @@ def upper_boundary(prob: np.ndarray, edges: np.ndarray, lat: np.ndarray, cfg: La
 
 
 # -- depth of the layout -------------------------------------------------------------------------
-def compose_depth(H: int, W: int, lat_floor: np.ndarray, lat_top: np.ndarray, h: float, ceiling: float | None,
-                  cfg: LayoutConfig) -> np.ndarray:
+def compose_depth(
+    H: int, W: int, lat_floor: np.ndarray, lat_top: np.ndarray, h: float, ceiling: float | None, cfg: LayoutConfig
+) -> np.ndarray:
     """Radial depth [H, W] (metres, +inf sky) from per-column boundary latitudes [W] (radians).
 
     ``lat_floor`` floor boundary (< 0), ``lat_top`` ceiling / sky boundary (> 0); ``h`` camera height;
@@ -259,8 +273,9 @@ def compose_depth(H: int, W: int, lat_floor: np.ndarray, lat_top: np.ndarray, h:
     return np.where(lat >= lat_top[None, :], ceil, depth)
 
 
-def estimate_layout_depth(pano: np.ndarray, cfg: LayoutConfig | None = None,
-                          out_shape: tuple[int, int] | None = None) -> LayoutDepth:
+def estimate_layout_depth(
+    pano: np.ndarray, cfg: LayoutConfig | None = None, out_shape: tuple[int, int] | None = None
+) -> LayoutDepth:
     """Radial depth [H, W] (metres, +inf sky) of a linear RGB panorama [H, W, 3] (module docstring)."""
     from holoflow.imageops.color import linear_to_uint8
 
@@ -339,8 +354,13 @@ def _estimate(srgb, cfg, facts, H0, W0):
     ef = np.zeros_like(edges)
     ef[1:] = edges[::-1][:-1]
     cost_c = row_costs(pc[::-1], ef, cfg.edge_weight)  # [Hk, Wk] mirrored: ceiling ends at row H - b
-    dist = np.exp(np.linspace(np.log(cfg.min_depth), np.log(cfg.max_depth_indoor if scene == "indoor"
-                                                              else cfg.max_depth_outdoor), cfg.states))
+    dist = np.exp(
+        np.linspace(
+            np.log(cfg.min_depth),
+            np.log(cfg.max_depth_indoor if scene == "indoor" else cfg.max_depth_outdoor),
+            cfg.states,
+        )
+    )
     row_f = np.clip(np.round((np.pi / 2 + np.arctan(h / dist)) / np.pi * Hk).astype(np.int64), 0, Hk - 1)
     # typical rooms: a weak log-normal prior on the wall distance (per column, in row-cost units)
     prior = cfg.distance_prior * (np.log(dist / cfg.typical_distance) / 0.7) ** 2
@@ -350,8 +370,9 @@ def _estimate(srgb, cfg, facts, H0, W0):
         if d is not None:
             return _finish(d, facts["ceiling_above_eye_m"], frame)
     best = None
-    heights = [None] if scene != "indoor" else list(h * np.exp(np.linspace(np.log(0.3), np.log(2.5),
-                                                                           cfg.free_ceiling_steps)))
+    heights = (
+        [None] if scene != "indoor" else list(h * np.exp(np.linspace(np.log(0.3), np.log(2.5), cfg.free_ceiling_steps)))
+    )
     for ceiling in heights:
         if ceiling is None:
             data = data_f
@@ -426,9 +447,11 @@ def _finish(d, ceiling, f: _Frame):
     lat_f0 = _interp_wrap(lat_f, cols)
     lat_c0 = _interp_wrap(lat_c, cols)
     depth = compose_depth(H0, W0, lat_f0, lat_c0, h, ceiling, cfg)
-    facts["floor_distance_m"] = {"median": round(float(np.median(d)), 3),
-                                 "p10": round(float(np.percentile(d, 10)), 3),
-                                 "p90": round(float(np.percentile(d, 90)), 3)}
+    facts["floor_distance_m"] = {
+        "median": round(float(np.median(d)), 3),
+        "p10": round(float(np.percentile(d, 10)), 3),
+        "p90": round(float(np.percentile(d, 90)), 3),
+    }
     return LayoutDepth(depth.astype(np.float32), facts)
 
 

@@ -16,6 +16,7 @@ The panorama is assumed upright (tilt already corrected, ``vanishing.py``).
   (4 orientations x offsets) per column with a constant penalty per corner, so the layout is a
   Manhattan polygon (with occlusion jumps allowed) rather than a free per-column distance.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,8 +24,14 @@ import numpy as np
 UP = np.array([0.0, -1.0, 0.0])
 
 
-def segment_rays(srgb8: np.ndarray, pitches_deg=(-40.0, 0.0, 40.0), views: int = 8, size: int = 256,
-                 fov_deg: float = 90.0, min_length: float = 10.0):
+def segment_rays(
+    srgb8: np.ndarray,
+    pitches_deg=(-40.0, 0.0, 40.0),
+    views: int = 8,
+    size: int = 256,
+    fov_deg: float = 90.0,
+    min_length: float = 10.0,
+):
     """Line segments of an 8-bit sRGB panorama [H, W, 3] seen by ``views`` x len(``pitches_deg``)
     perspective views (degrees, + = looking up; ``segments.view_segments``). Returns (p1 [N, 3],
     p2 [N, 3]) unit end rays (world), normals [N, 3] (unit, p1 x p2) and lengths [N] (view pixels)."""
@@ -65,13 +72,23 @@ def manhattan_yaw(normals: np.ndarray, lengths: np.ndarray) -> tuple[float | Non
     diff = np.angle(np.exp(4j * (a - psi0))) / 4  # [-pi/4, pi/4)
     near = np.abs(diff) < np.radians(6)
     psi = psi0 + float(np.angle(np.sum(w[near] * np.exp(4j * diff[near])))) / 4 if near.any() else psi0
-    return float(np.mod(psi, np.pi / 2)), {"horizontal_segments": int(ok.sum()),
-                                           "yaw_deg": round(float(np.degrees(np.mod(psi, np.pi / 2))), 2),
-                                           "yaw_support": round(float(w[near].sum() / max(w.sum(), 1e-9)), 3)}
+    return float(np.mod(psi, np.pi / 2)), {
+        "horizontal_segments": int(ok.sum()),
+        "yaw_deg": round(float(np.degrees(np.mod(psi, np.pi / 2))), 2),
+        "yaw_support": round(float(w[near].sum() / max(w.sum(), 1e-9)), 3),
+    }
 
 
-def segment_evidence(p1: np.ndarray, p2: np.ndarray, normals: np.ndarray, yaw: float, H: int, W: int,
-                     tol_deg: float = 4.0, horizon_deg: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+def segment_evidence(
+    p1: np.ndarray,
+    p2: np.ndarray,
+    normals: np.ndarray,
+    yaw: float,
+    H: int,
+    W: int,
+    tol_deg: float = 4.0,
+    horizon_deg: float = 2.0,
+) -> tuple[np.ndarray, np.ndarray]:
     """Boundary evidence maps from Manhattan-horizontal segments: (below [2, H, W], above [2, H, W]),
     index f = 0 for segments along azimuth ``yaw``, 1 along yaw + 90 degrees. A pixel counts the arc
     samples of such segments that fall in it (capped at 1 per segment and pixel, map clipped to
@@ -141,4 +158,4 @@ def manhattan_dp(cost: np.ndarray, corner: float) -> np.ndarray:
     path[-1] = int(np.argmin(acc))
     for c in range(n - 1, 0, -1):
         path[c - 1] = path[c] if stay[c, path[c]] else best[c]
-    return path[pad:pad + W]
+    return path[pad : pad + W]

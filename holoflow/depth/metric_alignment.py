@@ -15,6 +15,7 @@ and its points would hang in the air behind every window. ``sky_disparity`` pick
 disparity below which the references are sky with the fewest mistakes, and every pixel below it is
 sky. With no sky among the references the rule is off.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,11 +33,15 @@ def robust_affine_fit(x: np.ndarray, y: np.ndarray, huber: float = 0.05, iters: 
     keep = np.isfinite(x) & np.isfinite(y) & (y > 0)
     x, y = x[keep], y[keep]
     if x.size < 2:
-        raise ValueError(f"metric alignment: {x.size} usable reference pixels (need >= 2); "
-                         "the metric faces may be all sky or invalid")
+        raise ValueError(
+            f"metric alignment: {x.size} usable reference pixels (need >= 2); "
+            "the metric faces may be all sky or invalid"
+        )
     if not np.ptp(x) > 1e-12 * max(np.abs(x).max(), 1e-30):
-        raise ValueError("metric alignment: the blended disparity is constant over the reference pixels; "
-                         "scale and offset are not determined")
+        raise ValueError(
+            "metric alignment: the blended disparity is constant over the reference pixels; "
+            "scale and offset are not determined"
+        )
     A = np.stack([x / y, 1.0 / y], 1)  # rows of the relative residual: A @ [a, b] - 1
     w = np.ones(x.size)
     coef = np.zeros(2)
@@ -55,9 +60,15 @@ def robust_affine_fit(x: np.ndarray, y: np.ndarray, huber: float = 0.05, iters: 
     if keep.sum() >= 2 and np.ptp(x[keep]) > 0:
         coef, *_ = np.linalg.lstsq(A[keep], np.ones(int(keep.sum())), rcond=None)
         r = A @ coef - 1.0
-    return {"scale": float(coef[0]), "offset": float(coef[1]), "n": int(x.size),
-            "rel_rms": float(np.sqrt(np.mean(r ** 2))), "rel_median_abs": float(np.median(np.abs(r))),
-            "inlier_frac": float(np.mean(np.abs(r) <= huber)), "iters": done}
+    return {
+        "scale": float(coef[0]),
+        "offset": float(coef[1]),
+        "n": int(x.size),
+        "rel_rms": float(np.sqrt(np.mean(r**2))),
+        "rel_median_abs": float(np.median(np.abs(r))),
+        "inlier_frac": float(np.mean(np.abs(r) <= huber)),
+        "iters": done,
+    }
 
 
 def sky_disparity(aligned: np.ndarray, sky: np.ndarray, min_pixels: int = 50) -> float | None:
@@ -73,7 +84,7 @@ def sky_disparity(aligned: np.ndarray, sky: np.ndarray, min_pixels: int = 50) ->
     order = np.argsort(aligned, kind="stable")
     a, s = aligned[order], sky[order]
     # threshold between a[k - 1] and a[k]: the k lowest are called sky
-    surface_below = np.concatenate([[0], np.cumsum(~s)])           # surface pixels called sky
+    surface_below = np.concatenate([[0], np.cumsum(~s)])  # surface pixels called sky
     sky_above = int(s.sum()) - np.concatenate([[0], np.cumsum(s)])  # sky pixels called surface
     k = int(np.argmin(surface_below + sky_above))
     if k == 0:

@@ -5,6 +5,7 @@ bench call these functions; docs/depth.md explains the method.
 Arrays: panoramas are numpy [H, W, 3] linear RGB; radial depth [H, W] metres (+inf sky); disparity
 [H, W] relative radial disparity (~ 1/r up to a global affine map). Faces: holoflow.geometry.icosahedron.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -50,8 +51,7 @@ def resize_radial(radial: np.ndarray, height: int, width: int) -> np.ndarray:
     return radial[rows[:, None], cols[None, :]]
 
 
-def sample_faces(pano: np.ndarray, K, viewmat, size: int, mode: str = "bilinear", device: str = "cpu"
-                 ) -> np.ndarray:
+def sample_faces(pano: np.ndarray, K, viewmat, size: int, mode: str = "bilinear", device: str = "cpu") -> np.ndarray:
     """Perspective faces [F, size, size, C] of an equirect image [H, W, C] (or [H, W]), resampled on
     ``device`` in float64."""
     from holoflow.geometry.sampling import equirect_to_pinhole
@@ -70,8 +70,15 @@ def sample_radial(radial: np.ndarray, K, viewmat, size: int) -> np.ndarray:
     return np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.inf)
 
 
-def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, cfg: TangentDepthParams,
-                       seed: int = 0, device: str = "cpu", progress: Progress = None) -> TangentDepth:
+def estimate_disparity(
+    pano: np.ndarray,
+    truth: np.ndarray | None,
+    engine: str,
+    cfg: TangentDepthParams,
+    seed: int = 0,
+    device: str = "cpu",
+    progress: Progress = None,
+) -> TangentDepth:
     """Relative radial disparity [H, W] of a panorama [H, W, 3] (see the module docstring), with
     tangent_depth's ``cfg`` (face_size, padding, alignment, blend_ramp; ``width`` is the caller's).
 
@@ -87,8 +94,9 @@ def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, 
     images = sample_faces(pano, K, V, size, device=device).astype(np.float32)  # [F, h, w, 3]
     dirs, cos = face_rays(K, V, size, size)
     truth_faces = sample_radial(truth, K, V, size) if truth is not None else None
-    raw, meta = _engine(TangentDepthParams, engine, "relative")(images, dirs, cos, truth_faces, seed, cfg, device,
-                                                                progress, pano=pano)
+    raw, meta = _engine(TangentDepthParams, engine, "relative")(
+        images, dirs, cos, truth_faces, seed, cfg, device, progress, pano=pano
+    )
     meta = {**meta, "why": why}
     raw = np.asarray(raw, dtype=np.float64)
     if raw.shape != cos.shape:
@@ -98,12 +106,10 @@ def estimate_disparity(pano: np.ndarray, truth: np.ndarray | None, engine: str, 
     from holoflow.geometry.icosahedron import frustum_weight
 
     disparity = blend_faces(al.radial, _np(frustum_weight(faces, cfg.blend_ramp)), K, V, H, W, device)
-    return TangentDepth(disparity.astype(np.float32), raw.astype(np.float32), al.radial.astype(np.float32),
-                        al, meta)
+    return TangentDepth(disparity.astype(np.float32), raw.astype(np.float32), al.radial.astype(np.float32), al, meta)
 
 
-def blend_faces(radial: np.ndarray, weights: np.ndarray, K, viewmat, H: int, W: int, device: str = "cpu"
-                ) -> np.ndarray:
+def blend_faces(radial: np.ndarray, weights: np.ndarray, K, viewmat, H: int, W: int, device: str = "cpu") -> np.ndarray:
     """Frustum blending: per-face radial disparity [F, h, w] (NaN = invalid) -> equirect [H, W]
     (the projection runs on ``device`` in float64).
 
@@ -126,8 +132,9 @@ def blend_faces(radial: np.ndarray, weights: np.ndarray, K, viewmat, H: int, W: 
             idx = ndi.distance_transform_edt(~ok[f], return_distances=False, return_indices=True)
             filled[f] = radial[f][tuple(idx)]
     wt = np.where(ok, weights, 0.0)
-    accum, wsum = pinhole_to_equirect(_t(filled[:, None], device), _t(K, device), _t(viewmat, device), H, W,
-                                      weights=_t(wt[:, None], device))
+    accum, wsum = pinhole_to_equirect(
+        _t(filled[:, None], device), _t(K, device), _t(viewmat, device), H, W, weights=_t(wt[:, None], device)
+    )
     accum, wsum = accum[0].cpu().numpy(), wsum[0].cpu().numpy()
     covered = wsum > 1e-12
     out = np.where(covered, accum / np.where(covered, wsum, 1.0), np.nan)
@@ -136,7 +143,7 @@ def blend_faces(radial: np.ndarray, weights: np.ndarray, K, viewmat, H: int, W: 
             raise ValueError("the valid faces cover no panorama pixel; nothing to blend")
         tiled = np.concatenate([out, out, out], axis=1)  # wrap-aware nearest fill
         idx = ndi.distance_transform_edt(np.isnan(tiled), return_distances=False, return_indices=True)
-        out = tiled[tuple(idx)][:, W:2 * W]
+        out = tiled[tuple(idx)][:, W : 2 * W]
     return out
 
 
@@ -151,9 +158,16 @@ class MetricDepth:
     engine: dict
 
 
-def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.ndarray | None, engine: str,
-                          cfg: MetricAlignParams, seed: int = 0, device: str = "cpu",
-                          progress: Progress = None) -> MetricDepth:
+def metric_from_disparity(
+    disparity: np.ndarray,
+    pano: np.ndarray,
+    truth: np.ndarray | None,
+    engine: str,
+    cfg: MetricAlignParams,
+    seed: int = 0,
+    device: str = "cpu",
+    progress: Progress = None,
+) -> MetricDepth:
     """Metric radial depth from a relative disparity [H, W] and metric depth (``engine``, a name in
     ``MetricAlignParams.ENGINES``; ``auto`` resolves by ``resolve_engine``) on a seeded subset of
     cfg.faces faces, with metric_align's ``cfg``."""
@@ -165,20 +179,23 @@ def metric_from_disparity(disparity: np.ndarray, pano: np.ndarray, truth: np.nda
     images = sample_faces(pano, K, V, size, device=device).astype(np.float32)
     dirs, cos = face_rays(K, V, size, size)
     truth_faces = sample_radial(truth, K, V, size) if truth is not None else None
-    z, meta = _engine(MetricAlignParams, engine, "metric")(images, dirs, cos, truth_faces, [seed, 2], cfg, device,
-                                                          progress, pano=pano)
+    z, meta = _engine(MetricAlignParams, engine, "metric")(
+        images, dirs, cos, truth_faces, [seed, 2], cfg, device, progress, pano=pano
+    )
     meta = {**meta, "why": why}
     z = np.asarray(z, dtype=np.float64)
     ref = np.where(np.isfinite(z) & (z > 0), cos / np.where(z > 0, z, 1.0), np.nan)  # radial disparity
     x = sample_faces(disparity, K, V, size, device=device)[..., 0]
     fit = robust_affine_fit(x, ref, huber=cfg.huber)
     if not fit["scale"] > 0:
-        raise ValueError(f"metric alignment gave a non-positive scale ({fit['scale']:.3g}): the relative "
-                         "disparity does not grow with the reference disparity (wrong engine output?)")
+        raise ValueError(
+            f"metric alignment gave a non-positive scale ({fit['scale']:.3g}): the relative "
+            "disparity does not grow with the reference disparity (wrong engine output?)"
+        )
     depth = disparity_to_depth(disparity, fit["scale"], fit["offset"], cfg.max_depth)
     limit = sky_disparity(fit["scale"] * x + fit["offset"], ~(np.isfinite(z) & (z > 0)) & np.isfinite(x))
     fit["sky_disparity"] = limit
-    if limit is not None:       # what the metric engine calls sky starts there in the aligned disparity
+    if limit is not None:  # what the metric engine calls sky starts there in the aligned disparity
         depth = np.where(fit["scale"] * disparity + fit["offset"] < limit, np.inf, depth)
     depth = sky_mixed_edges(depth)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)

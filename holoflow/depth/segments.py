@@ -4,13 +4,20 @@ OpenCV's LSD runs on pinhole views of the panorama (``equirect_to_pinhole``); ea
 pixels are lifted to unit rays in the world frame of the panorama centre (docs/conventions.md: OpenCV
 frame, +y down), so the segment lies on the great circle through both rays.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 
-def view_segments(srgb8: np.ndarray, yaws: np.ndarray, pitches: np.ndarray, size: int = 256,
-                  fov_deg: float = 90.0, min_length: float = 10.0):
+def view_segments(
+    srgb8: np.ndarray,
+    yaws: np.ndarray,
+    pitches: np.ndarray,
+    size: int = 256,
+    fov_deg: float = 90.0,
+    min_length: float = 10.0,
+):
     """LSD segments of an 8-bit sRGB panorama [H, W, 3] seen by V pinhole views (``yaws`` [V] and
     ``pitches`` [V] in radians, + pitch = looking up; ``size`` px square, ``fov_deg`` degrees).
     Segments shorter than ``min_length`` view pixels are dropped. Returns (p1 [N, 3], p2 [N, 3]) unit

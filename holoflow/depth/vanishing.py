@@ -7,13 +7,15 @@ direction most normals are perpendicular to: start at the image's up (-y), keep 
 shrinking angle of perpendicular (10, 5, 3, 2 deg), and take the smallest eigenvector of their
 length-weighted scatter matrix. Conventions: docs/conventions.md (+y down: up is -y).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 
-def segment_normals(srgb8: np.ndarray, views: int = 8, size: int = 256, fov_deg: float = 90.0,
-                    min_length: float = 12.0) -> tuple[np.ndarray, np.ndarray]:
+def segment_normals(
+    srgb8: np.ndarray, views: int = 8, size: int = 256, fov_deg: float = 90.0, min_length: float = 12.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Great-circle normals [N, 3] (world, unit) and lengths [N] (pixels) of the line segments seen by
     ``views`` horizontal perspective views of an 8-bit sRGB panorama [H, W, 3] (``segments.view_segments``)."""
     from holoflow.depth.segments import great_circle_normals, view_segments
@@ -23,8 +25,9 @@ def segment_normals(srgb8: np.ndarray, views: int = 8, size: int = 256, fov_deg:
     return great_circle_normals(p1, p2), lengths
 
 
-def vertical_direction(normals: np.ndarray, lengths: np.ndarray, max_tilt_deg: float = 30.0
-                       ) -> tuple[np.ndarray | None, dict]:
+def vertical_direction(
+    normals: np.ndarray, lengths: np.ndarray, max_tilt_deg: float = 30.0
+) -> tuple[np.ndarray | None, dict]:
     """The vertical vanishing direction (unit, pointing up, i.e. y < 0) from segment normals, or None
     when too few segments support one or it is further than ``max_tilt_deg`` from -y; and facts."""
     v = np.array([0.0, -1.0, 0.0])
@@ -32,16 +35,23 @@ def vertical_direction(normals: np.ndarray, lengths: np.ndarray, max_tilt_deg: f
     for tol in (10.0, 5.0, 3.0, 2.0):
         keep = np.abs(normals @ v) < np.sin(np.radians(tol))
         if keep.sum() < 6:
-            return None, {"segments": int(len(normals)), "vertical_segments": int(keep.sum()),
-                          "note": "too few vertical segments; no tilt correction"}
+            return None, {
+                "segments": int(len(normals)),
+                "vertical_segments": int(keep.sum()),
+                "note": "too few vertical segments; no tilt correction",
+            }
         n, w = normals[keep], lengths[keep]
         M = (n * w[:, None]).T @ n
         vals, vecs = np.linalg.eigh(M)
         v = vecs[:, 0] * (-1.0 if vecs[1, 0] > 0 else 1.0)
         support = float(w.sum() / max(lengths.sum(), 1e-9))
     tilt = float(np.degrees(np.arccos(np.clip(-v[1], -1.0, 1.0))))
-    facts = {"segments": int(len(normals)), "vertical_segments": int(keep.sum()),
-             "vertical_support": round(support, 3), "tilt_deg": round(tilt, 3)}
+    facts = {
+        "segments": int(len(normals)),
+        "vertical_segments": int(keep.sum()),
+        "vertical_support": round(support, 3),
+        "tilt_deg": round(tilt, 3),
+    }
     if tilt > max_tilt_deg:
         return None, {**facts, "note": f"tilt {tilt:.1f} deg > max_tilt_deg; not corrected"}
     return v, facts

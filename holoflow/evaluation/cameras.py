@@ -1,5 +1,6 @@
 """Cameras to score a model at: the run's base cameras with the PANO set, seeded supplementary and
 novel cameras, true renders of the procedural scene there, and the pixels hidden from the centre."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,7 +13,7 @@ if TYPE_CHECKING:
     from holoflow.scene import Scene
 
 
-MAX_OFFSET_M = 1.0      # novel cameras: at most this far from the centre (metres)
+MAX_OFFSET_M = 1.0  # novel cameras: at most this far from the centre (metres)
 
 
 def hidden_from_centre(scene, origins, dirs) -> "torch.Tensor":
@@ -26,12 +27,12 @@ def hidden_from_centre(scene, origins, dirs) -> "torch.Tensor":
 
     from holoflow.scene import cast
 
-    t = cast(scene, origins, dirs)[1].double()                                  # [N]
+    t = cast(scene, origins, dirs)[1].double()  # [N]
     sky = ~torch.isfinite(t)
-    x = origins.double() + torch.nan_to_num(t, posinf=0.0)[:, None] * dirs.double()   # [N, 3] hit points
-    r = x.norm(dim=1)                                                           # [N] m from the centre
+    x = origins.double() + torch.nan_to_num(t, posinf=0.0)[:, None] * dirs.double()  # [N, 3] hit points
+    r = x.norm(dim=1)  # [N] m from the centre
     u = torch.where(sky[:, None] | (r[:, None] < 1e-9), dirs.double(), x / r.clamp_min(1e-9)[:, None])
-    tc = cast(scene, torch.zeros_like(u), u)[1].double()                         # [N]
+    tc = cast(scene, torch.zeros_like(u), u)[1].double()  # [N]
     return torch.where(sky, torch.isfinite(tc), tc < r * (1 - 2e-3) - 1e-2)
 
 
@@ -41,12 +42,13 @@ def hidden_masks(scene, viewmats, K, width: int, height: int) -> "torch.Tensor":
 
     from holoflow.geometry.camera import pinhole_rays
 
-    o, d = pinhole_rays(K.double(), viewmats.double(), height, width)           # [C, H, W, 3] each
+    o, d = pinhole_rays(K.double(), viewmats.double(), height, width)  # [C, H, W, 3] each
     return hidden_from_centre(scene, o.reshape(-1, 3), d.reshape(-1, 3)).reshape(len(viewmats), height, width)
 
 
-def novel_cameras(scene, n: int, offset: float, seed: int, K=None, candidates: int = 16,
-                  probe: int = 16) -> "torch.Tensor":
+def novel_cameras(
+    scene, n: int, offset: float, seed: int, K=None, candidates: int = 16, probe: int = 16
+) -> "torch.Tensor":
     """n seeded novel cameras off the centre that look at what the panorama could not see, viewmats
     [n, 4, 4].
 
@@ -66,15 +68,15 @@ def novel_cameras(scene, n: int, offset: float, seed: int, K=None, candidates: i
     u = torch.nn.functional.normalize(torch.randn(n, 3, generator=g, dtype=torch.float64), dim=1)
     frac = (0.5 + 0.5 * torch.rand(n, generator=g, dtype=torch.float64)) * offset
     look = torch.nn.functional.normalize(torch.randn(n, candidates, 3, generator=g, dtype=torch.float64), dim=2)
-    free = cast(scene, torch.zeros(n, 3), u.float())[1].double()                 # [n] metres (inf = sky)
+    free = cast(scene, torch.zeros(n, 3), u.float())[1].double()  # [n] metres (inf = sky)
     dist = torch.minimum(frac * torch.nan_to_num(free, posinf=1e9), torch.full_like(frac, MAX_OFFSET_M))
-    eyes = u * dist[:, None]                                                     # [n, 3]
+    eyes = u * dist[:, None]  # [n, 3]
     Kp = torch.tensor([[probe / 2, 0, probe / 2], [0, probe / 2, probe / 2], [0, 0, 1]], dtype=torch.float64)
     if K is not None:
         Kp = square_K(K, probe).double()
-    vms = look_at(eyes[:, None].expand(n, candidates, 3), eyes[:, None] + look)     # [n, candidates, 4, 4]
+    vms = look_at(eyes[:, None].expand(n, candidates, 3), eyes[:, None] + look)  # [n, candidates, 4, 4]
     hidden = hidden_masks(scene, vms.reshape(-1, 4, 4), Kp, probe, probe).flatten(1).double().mean(1)
-    pick = hidden.reshape(n, candidates).argmax(1)                               # [n] first on ties
+    pick = hidden.reshape(n, candidates).argmax(1)  # [n] first on ties
     return vms[torch.arange(n), pick].float()
 
 
@@ -87,8 +89,9 @@ def square_K(K, size: int) -> "torch.Tensor":
     return (K.double() * s[:, None]).to(K.dtype)
 
 
-def true_views(scene, viewmats, K, width: int, height: int, samples: int = 2,
-               cache: dict | None = None) -> "torch.Tensor":
+def true_views(
+    scene, viewmats, K, width: int, height: int, samples: int = 2, cache: dict | None = None
+) -> "torch.Tensor":
     """True sRGB renders [C, H, W, 3] of the procedural scene at pinhole cameras (``samples`` per
     pixel side, antialiased like the base panorama). ``cache`` maps camera bytes -> render, so
     variants that share cameras ray-cast each view once."""
@@ -102,8 +105,9 @@ def true_views(scene, viewmats, K, width: int, height: int, samples: int = 2,
     for vm in viewmats:
         key = (scene.prompt, scene.seed, vm.numpy().tobytes(), K.numpy().tobytes(), width, height, samples)
         if key not in cache:
-            cache[key] = torch.from_numpy(render_pinhole(scene, K.numpy(), vm.numpy(), width, height,
-                                                         samples=samples)[0])
+            cache[key] = torch.from_numpy(
+                render_pinhole(scene, K.numpy(), vm.numpy(), width, height, samples=samples)[0]
+            )
         out.append(cache[key])
     return linear_to_srgb_torch(torch.stack(out))
 
@@ -136,8 +140,10 @@ def base_views(run_dir: Path) -> tuple["Scene", Views]:
 
     scene_file = run_dir / "base_pano" / "scene.json"
     if not scene_file.is_file():
-        raise SystemExit(f"eval: {scene_file} missing: eval needs the procedural base_pano engine (truth); "
-                         "for a run without truth use `holoflow eval --run RUN`")
+        raise SystemExit(
+            f"eval: {scene_file} missing: eval needs the procedural base_pano engine (truth); "
+            "for a run without truth use `holoflow eval --run RUN`"
+        )
     return Scene.from_json(scene_file.read_text()), pano_views(run_dir)
 
 

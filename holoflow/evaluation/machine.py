@@ -3,6 +3,7 @@
 Every table names the machine it was measured on (:func:`machine`) and the load average around the
 measurement (:func:`load`): the development machines are shared 2-core CPUs.
 """
+
 from __future__ import annotations
 
 import os

@@ -1,6 +1,7 @@
 """Running the pipeline for one evaluated scene (served from the store when cached) and reading which
 engines made a run's depth. The project is the checkout holding the holoflow package
 (holoflow.flow.code_closure.HOLOFLOW_ROOT): its pipeline.yaml, and artifacts/ unless a store is given."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,7 +23,7 @@ def depth_engines(run_dir: Path) -> dict[str, str]:
     from holoflow.flow.status import chosen_engine
     from holoflow.flow.store import Store
 
-    store = Store(run_dir.parent.parent)                      # runs/<id> lies in the store's root
+    store = Store(run_dir.parent.parent)  # runs/<id> lies in the store's root
     stages = (store.run_info(run_dir.name) or {}).get("stages", {})
     out = {}
     for name in DEPTH_STAGES:
@@ -48,8 +49,9 @@ def open_store(store: Path | None) -> "Store":
     return Store(store or os.environ.get("HOLOFLOW_STORE") or (Path(HOLOFLOW_ROOT) / "artifacts"))
 
 
-def run_pipeline(prompt: str, profile: str, sets: list[str], store: Path | None, uses: list[str] = ()
-                 ) -> tuple[Path, dict]:
+def run_pipeline(
+    prompt: str, profile: str, sets: list[str], store: Path | None, uses: list[str] = ()
+) -> tuple[Path, dict]:
     """Run (or reuse from the cache) the pipeline for ``prompt`` (``uses``: STAGE=PATH as ``--use``);
     returns (run folder, summary)."""
     import io

@@ -1,5 +1,6 @@
 """Scores of a run's two models, G0 (pre_opt) and G1 (transfer_opt): PSNR / SSIM / empty fraction at
 each camera set, NIQE / BRISQUE at the supplementary cameras (holoflow.quality), and a picture."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -31,11 +32,13 @@ def score(model, viewmats, K, targets, backend: str, hidden=None) -> tuple[dict,
 
     views = [dict(image=t, viewmat=vm, K=K) for t, vm in zip(targets, viewmats)]
     rgb, alpha = render_views(model, views, backend)
-    out = dict(psnr=metrics.psnr(rgb, targets), ssim=metrics.ssim(rgb, targets),
-               empty=metrics.empty_fraction(alpha))
+    out = dict(psnr=metrics.psnr(rgb, targets), ssim=metrics.ssim(rgb, targets), empty=metrics.empty_fraction(alpha))
     if hidden is not None:
-        out.update(hidden_psnr=metrics.psnr(rgb, targets, hidden), hidden_frac=float(hidden.double().mean()),
-                   hidden_empty=float(((alpha[..., 0] < 0.5) & hidden).double().sum() / max(int(hidden.sum()), 1)))
+        out.update(
+            hidden_psnr=metrics.psnr(rgb, targets, hidden),
+            hidden_frac=float(hidden.double().mean()),
+            hidden_empty=float(((alpha[..., 0] < 0.5) & hidden).double().sum() / max(int(hidden.sum()), 1)),
+        )
     return out, rgb
 
 
@@ -67,8 +70,7 @@ def nr_scores(model, viewmats, K, size: int, backend: str) -> dict:
 MODELS = (("G0", "pre_opt", "gaussians.ply"), ("G1", "transfer_opt", "scene.ply"))
 
 
-def score_models(run_dir: Path, views: dict[str, Views], backend: str, nr: tuple | None = None
-                 ) -> tuple[dict, dict]:
+def score_models(run_dir: Path, views: dict[str, Views], backend: str, nr: tuple | None = None) -> tuple[dict, dict]:
     """G0 (pre_opt) and G1 (transfer_opt) of a run folder scored at each view set (``score``), and
     with ``nr`` = (viewmats, K, size) the no-reference scores there (``nr_scores``, key supp_nr):
     ({tag: {gaussians, set name: scores}}, {tag: {set name: renders [C, H, W, 3]}})."""
@@ -86,8 +88,16 @@ def score_models(run_dir: Path, views: dict[str, Views], backend: str, nr: tuple
     return result, renders
 
 
-def evaluate_run(run_dir: Path, novel: int, offset: float, supp: int, seed: int, backend: str,
-                 nr_size: int = 512, cache: dict | None = None) -> dict:
+def evaluate_run(
+    run_dir: Path,
+    novel: int,
+    offset: float,
+    supp: int,
+    seed: int,
+    backend: str,
+    nr_size: int = 512,
+    cache: dict | None = None,
+) -> dict:
     """Scores of G0 and G1 of one pipeline run (folder runs/<id>/ with one folder per stage):
     ``novel`` random cameras, a seeded subset of ``supp`` supplementary cameras (0 = all), NIQE /
     BRISQUE at those supplementary cameras rendered at ``nr_size`` px (0 = skip)."""
@@ -101,8 +111,11 @@ def evaluate_run(run_dir: Path, novel: int, offset: float, supp: int, seed: int,
         views[name] = Views(vm, K, true_views(scene, vm, K, w, h, cache=cache), hidden_masks(scene, vm, K, w, h))
     result, renders = score_models(run_dir, views, backend, (supp_vm, supp_K, nr_size) if nr_size else None)
     result["engines"] = depth_engines(run_dir)
-    result["_renders"] = {"truth": views["novel"].targets, "hidden": views["novel"].hidden,
-                          **{tag: r["novel"] for tag, r in renders.items()}}
+    result["_renders"] = {
+        "truth": views["novel"].targets,
+        "hidden": views["novel"].hidden,
+        **{tag: r["novel"] for tag, r in renders.items()},
+    }
     return result
 
 

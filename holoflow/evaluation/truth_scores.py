@@ -16,6 +16,7 @@ colour clamped to [0, 1]. Per ring (cameras.json ``ring``):
 
 Pure functions of tensors, plus ``score_truth`` (files in, scores and pictures out).
 """
+
 from __future__ import annotations
 
 import math
@@ -40,8 +41,9 @@ def pooled_psnr(pred: torch.Tensor, target: torch.Tensor) -> float:
     return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
 
 
-def depth_errors(depth: torch.Tensor, alpha: torch.Tensor, truth: torch.Tensor, empty_alpha: float = EMPTY_ALPHA
-                 ) -> dict:
+def depth_errors(
+    depth: torch.Tensor, alpha: torch.Tensor, truth: torch.Tensor, empty_alpha: float = EMPTY_ALPHA
+) -> dict:
     """AbsRel and delta < 1.25 of rendered depth [V, H, W] (metres; camera z) against truth [V, H, W]
     (camera z, +inf / NaN = no truth) over pixels with finite truth > 0 and alpha [V, H, W] >=
     ``empty_alpha``; ``coverage`` = those pixels / finite-truth pixels. NaN where no pixel qualifies."""
@@ -53,35 +55,55 @@ def depth_errors(depth: torch.Tensor, alpha: torch.Tensor, truth: torch.Tensor, 
         return dict(abs_rel=math.nan, delta1=math.nan, coverage=0.0, pixels=0)
     d, g = depth.double()[m], t[m]
     ratio = torch.maximum(d / g, g / d)
-    return dict(abs_rel=float(((d - g).abs() / g).mean()), delta1=float((ratio < DELTA).double().mean()),
-                coverage=n / max(int(finite.sum()), 1), pixels=n)
+    return dict(
+        abs_rel=float(((d - g).abs() / g).mean()),
+        delta1=float((ratio < DELTA).double().mean()),
+        coverage=n / max(int(finite.sum()), 1),
+        pixels=n,
+    )
 
 
-def ring_scores(rgb: torch.Tensor, alpha: torch.Tensor, depth: torch.Tensor, truth_rgb: torch.Tensor,
-                truth_z: torch.Tensor, empty_alpha: float = EMPTY_ALPHA, crack_alpha: float = CRACK_ALPHA) -> dict:
+def ring_scores(
+    rgb: torch.Tensor,
+    alpha: torch.Tensor,
+    depth: torch.Tensor,
+    truth_rgb: torch.Tensor,
+    truth_z: torch.Tensor,
+    empty_alpha: float = EMPTY_ALPHA,
+    crack_alpha: float = CRACK_ALPHA,
+) -> dict:
     """Scores of one ring (module docstring): rgb / truth_rgb [V, H, W, 3] sRGB, alpha / depth / truth_z
     [V, H, W]."""
     from holoflow.quality import metrics
 
     p = per_view_psnr(rgb, truth_rgb)
     s = [metrics.ssim(a, b) for a, b in zip(rgb, truth_rgb)]
-    out = dict(views=len(rgb), psnr=pooled_psnr(rgb, truth_rgb), psnr_mean=float(p.mean()), ssim=sum(s) / len(s),
-               empty=float((alpha < empty_alpha).double().mean()), cracked=float((alpha < crack_alpha).double().mean()),
-               per_view_psnr=[round(float(x), 3) for x in p], per_view_ssim=[round(float(x), 4) for x in s],
-               per_view_cracked=[round(float(x), 5) for x in (alpha < crack_alpha).double().flatten(1).mean(1)])
+    out = dict(
+        views=len(rgb),
+        psnr=pooled_psnr(rgb, truth_rgb),
+        psnr_mean=float(p.mean()),
+        ssim=sum(s) / len(s),
+        empty=float((alpha < empty_alpha).double().mean()),
+        cracked=float((alpha < crack_alpha).double().mean()),
+        per_view_psnr=[round(float(x), 3) for x in p],
+        per_view_ssim=[round(float(x), 4) for x in s],
+        per_view_cracked=[round(float(x), 5) for x in (alpha < crack_alpha).double().flatten(1).mean(1)],
+    )
     out.update(depth_errors(depth, alpha, truth_z, empty_alpha))
     return out
 
 
-def render_truth_views(model, viewmats: torch.Tensor, K: torch.Tensor, width: int, height: int, backend: str = "cpu"
-                       ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def render_truth_views(
+    model, viewmats: torch.Tensor, K: torch.Tensor, width: int, height: int, backend: str = "cpu"
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``model`` rendered at viewmats [V, 4, 4] with K [3, 3]: (rgb [V, H, W, 3] sRGB in [0, 1], alpha
     [V, H, W], depth [V, H, W] expected camera z in metres, 0 where alpha is 0)."""
     from holoflow.recon.optimize import render_views
 
     blank = torch.zeros(height, width, 3)
-    rgb, alpha, depth = render_views(model, [dict(image=blank, viewmat=vm, K=K) for vm in viewmats], backend,
-                                     with_depth=True)
+    rgb, alpha, depth = render_views(
+        model, [dict(image=blank, viewmat=vm, K=K) for vm in viewmats], backend, with_depth=True
+    )
     return rgb, alpha[..., 0], depth[..., 0]
 
 
@@ -110,8 +132,14 @@ def score_truth(model_file: Path, truth_dir: Path, backend: str = "cpu") -> tupl
         m = torch.isclose(rings, torch.tensor(float(key)))
         scores[key] = ring_scores(rgb[m], alpha[m], depth[m], ts.rgb[m], ts.z[m])
         pictures[key] = (ts.rgb[m], rgb[m])
-    return dict(rings=scores, truth=str(ts.folder), views=len(ts.names), gaussians=len(model),
-                size=[int(W), int(H)], seconds=time.monotonic() - t0), pictures
+    return dict(
+        rings=scores,
+        truth=str(ts.folder),
+        views=len(ts.names),
+        gaussians=len(model),
+        size=[int(W), int(H)],
+        seconds=time.monotonic() - t0,
+    ), pictures
 
 
 def _f(x, fmt: str) -> str:
@@ -120,29 +148,42 @@ def _f(x, fmt: str) -> str:
 
 def ring_table(scores: dict) -> list[str]:
     """The ring table as text lines: one row per ring."""
-    head = (f"  {'ring':>6s} {'views':>5s} {'PSNR dB':>8s} {'mean':>7s} {'SSIM':>7s} {'AbsRel':>7s} {'d<1.25':>7s}"
-            f" {'empty %':>8s} {'a<0.9 %':>8s}")
-    rows = [f"truth set {scores['truth']} ({scores['views']} views, {scores['size'][0]}x{scores['size'][1]} px); "
-            f"{scores['gaussians']} Gaussians", head]
+    head = (
+        f"  {'ring':>6s} {'views':>5s} {'PSNR dB':>8s} {'mean':>7s} {'SSIM':>7s} {'AbsRel':>7s} {'d<1.25':>7s}"
+        f" {'empty %':>8s} {'a<0.9 %':>8s}"
+    )
+    rows = [
+        f"truth set {scores['truth']} ({scores['views']} views, {scores['size'][0]}x{scores['size'][1]} px); "
+        f"{scores['gaussians']} Gaussians",
+        head,
+    ]
     for key, r in scores["rings"].items():
-        rows.append(f"  {key + ' m':>6s} {r['views']:5d} {_f(r['psnr'], '{:.2f}'):>8s}"
-                    f" {_f(r['psnr_mean'], '{:.2f}'):>7s} {_f(r['ssim'], '{:.4f}'):>7s}"
-                    f" {_f(r['abs_rel'], '{:.4f}'):>7s} {_f(r['delta1'], '{:.4f}'):>7s}"
-                    f" {_f(100 * r['empty'], '{:.2f}'):>8s} {_f(100 * r['cracked'], '{:.2f}'):>8s}")
-    rows.append("PSNR: pooled over the ring's pixels (mean: of the per-view values), sRGB; AbsRel / d<1.25: rendered "
-                f"camera z vs the views' Z (finite truth, alpha >= {EMPTY_ALPHA}); empty: alpha < {EMPTY_ALPHA}; "
-                f"a<0.9: alpha < {CRACK_ALPHA}.")
+        rows.append(
+            f"  {key + ' m':>6s} {r['views']:5d} {_f(r['psnr'], '{:.2f}'):>8s}"
+            f" {_f(r['psnr_mean'], '{:.2f}'):>7s} {_f(r['ssim'], '{:.4f}'):>7s}"
+            f" {_f(r['abs_rel'], '{:.4f}'):>7s} {_f(r['delta1'], '{:.4f}'):>7s}"
+            f" {_f(100 * r['empty'], '{:.2f}'):>8s} {_f(100 * r['cracked'], '{:.2f}'):>8s}"
+        )
+    rows.append(
+        "PSNR: pooled over the ring's pixels (mean: of the per-view values), sRGB; AbsRel / d<1.25: rendered "
+        f"camera z vs the views' Z (finite truth, alpha >= {EMPTY_ALPHA}); empty: alpha < {EMPTY_ALPHA}; "
+        f"a<0.9: alpha < {CRACK_ALPHA}."
+    )
     return rows
 
 
 def ring_markdown(scores: dict) -> list[str]:
     """The ring table as markdown lines (rows = rings)."""
-    lines = ["| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | empty % | alpha < 0.9 % |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | empty % | alpha < 0.9 % |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for key, r in scores["rings"].items():
-        lines.append(f"| {key} m | {_f(r['psnr'], '{:.2f}')} | {_f(r['ssim'], '{:.4f}')} | "
-                     f"{_f(r['abs_rel'], '{:.4f}')} | {_f(r['delta1'], '{:.4f}')} | {_f(100 * r['empty'], '{:.2f}')} | "
-                     f"{_f(100 * r['cracked'], '{:.2f}')} |")
+        lines.append(
+            f"| {key} m | {_f(r['psnr'], '{:.2f}')} | {_f(r['ssim'], '{:.4f}')} | "
+            f"{_f(r['abs_rel'], '{:.4f}')} | {_f(r['delta1'], '{:.4f}')} | {_f(100 * r['empty'], '{:.2f}')} | "
+            f"{_f(100 * r['cracked'], '{:.2f}')} |"
+        )
     return lines
 
 

@@ -8,6 +8,7 @@ Z radial depth). World frame = holoflow's (docs/conventions.md): the panorama ce
 down, +z forward, metres. ``write_truth_set`` makes one from a procedural scene (holoflow.scene), with
 the eyes of ``ring_eyes``.
 """
+
 from __future__ import annotations
 
 import json
@@ -18,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-RINGS = (0.0, 0.25, 0.5, 1.0)     # metres off the centre
+RINGS = (0.0, 0.25, 0.5, 1.0)  # metres off the centre
 PER_RING = 8
 
 
@@ -46,8 +47,14 @@ def ring_eyes(rings: tuple[float, ...] = RINGS, per_ring: int = PER_RING) -> lis
     for r in rings:
         for k in range(per_ring):
             t = 2 * math.pi * k / per_ring
-            out.append(dict(ring=float(r), k=k, eye=[r * math.cos(t + 2), 0.0, r * math.sin(t + 2)],
-                            look=[math.cos(t), 0.0, math.sin(t)]))
+            out.append(
+                dict(
+                    ring=float(r),
+                    k=k,
+                    eye=[r * math.cos(t + 2), 0.0, r * math.sin(t + 2)],
+                    look=[math.cos(t), 0.0, math.sin(t)],
+                )
+            )
     return out
 
 
@@ -78,15 +85,31 @@ def read_truth_set(folder: Path) -> TruthSet:
     cams = json.loads(f.read_text())
     K = torch.tensor([[cams["fx"], 0, cams["cx"]], [0, cams["fy"], cams["cy"]], [0, 0, 1]], dtype=torch.float32)
     views = cams["views"]
-    rgb = np.stack([read_png(folder / v["file"]) for v in views])                       # [V, H, W, 3]
-    z = np.stack([read_exr(folder / v["exr"])[0]["Z"] for v in views])                  # [V, H, W]
-    vm = torch.tensor([v["viewmat"] for v in views], dtype=torch.float32)              # [V, 4, 4]
-    return TruthSet(folder, K, vm, [float(v["ring"]) for v in views], [str(v["name"]) for v in views],
-                    torch.from_numpy(rgb), torch.from_numpy(z), cams)
+    rgb = np.stack([read_png(folder / v["file"]) for v in views])  # [V, H, W, 3]
+    z = np.stack([read_exr(folder / v["exr"])[0]["Z"] for v in views])  # [V, H, W]
+    vm = torch.tensor([v["viewmat"] for v in views], dtype=torch.float32)  # [V, 4, 4]
+    return TruthSet(
+        folder,
+        K,
+        vm,
+        [float(v["ring"]) for v in views],
+        [str(v["name"]) for v in views],
+        torch.from_numpy(rgb),
+        torch.from_numpy(z),
+        cams,
+    )
 
 
-def write_truth_set(folder: Path, scene, size: int = 512, fov_deg: float = 47.43, rings: tuple[float, ...] = RINGS,
-                    per_ring: int = PER_RING, pano_width: int = 1024, samples: int = 2) -> Path:
+def write_truth_set(
+    folder: Path,
+    scene,
+    size: int = 512,
+    fov_deg: float = 47.43,
+    rings: tuple[float, ...] = RINGS,
+    per_ring: int = PER_RING,
+    pano_width: int = 1024,
+    samples: int = 2,
+) -> Path:
     """Write a truth set of a procedural ``scene`` (holoflow.scene.model.Scene) into ``folder``: the
     panorama (pano_width x pano_width / 2) and size x size px views with horizontal field of view
     ``fov_deg`` at the ``ring_eyes``, ray cast with ``samples`` x ``samples`` antialiasing. Returns
@@ -99,9 +122,12 @@ def write_truth_set(folder: Path, scene, size: int = 512, fov_deg: float = 47.43
 
     folder = Path(folder)
     (folder / "views").mkdir(parents=True, exist_ok=True)
-    rgb, depth = render_equirect(scene, pano_width, pano_width // 2, samples)            # [H, W, 3], [H, W]
-    write_exr(folder / "pano_z.exr", {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2], "Z": depth},
-              {"holoflow.depth_kind": "radial", "holoflow.colorspace": "linear"})
+    rgb, depth = render_equirect(scene, pano_width, pano_width // 2, samples)  # [H, W, 3], [H, W]
+    write_exr(
+        folder / "pano_z.exr",
+        {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2], "Z": depth},
+        {"holoflow.depth_kind": "radial", "holoflow.colorspace": "linear"},
+    )
     write_png(folder / "pano.png", linear_to_uint8(rgb))
     K = intrinsics_from_fov(fov_deg, size, size, dtype=torch.float64)
     views = []
@@ -110,11 +136,33 @@ def write_truth_set(folder: Path, scene, size: int = 512, fov_deg: float = 47.43
         rgb, z = render_pinhole(scene, K, vm, size, size, samples)
         name = f"{i:03d}"
         write_png(folder / "views" / f"{name}.png", linear_to_uint8(rgb))
-        write_exr(folder / "views" / f"{name}.exr", {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2], "Z": z},
-                  {"holoflow.depth_kind": "z"})
-        views.append(dict(name=name, file=f"views/{name}.png", exr=f"views/{name}.exr", ring=e["ring"], k=e["k"],
-                          eye=e["eye"], viewmat=vm.tolist(), escaped=float((~np.isfinite(z)).mean())))
-    cams = dict(width=size, height=size, fx=float(K[0, 0]), fy=float(K[1, 1]), cx=float(K[0, 2]), cy=float(K[1, 2]),
-                scene=f"procedural: {scene.prompt!r}, seed {scene.seed}", pano="pano_z.exr", views=views)
+        write_exr(
+            folder / "views" / f"{name}.exr",
+            {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2], "Z": z},
+            {"holoflow.depth_kind": "z"},
+        )
+        views.append(
+            dict(
+                name=name,
+                file=f"views/{name}.png",
+                exr=f"views/{name}.exr",
+                ring=e["ring"],
+                k=e["k"],
+                eye=e["eye"],
+                viewmat=vm.tolist(),
+                escaped=float((~np.isfinite(z)).mean()),
+            )
+        )
+    cams = dict(
+        width=size,
+        height=size,
+        fx=float(K[0, 0]),
+        fy=float(K[1, 1]),
+        cx=float(K[0, 2]),
+        cy=float(K[1, 2]),
+        scene=f"procedural: {scene.prompt!r}, seed {scene.seed}",
+        pano="pano_z.exr",
+        views=views,
+    )
     (folder / "cameras.json").write_text(json.dumps(cams, indent=1))
     return folder

@@ -26,6 +26,7 @@ The paper's Table II protocol taken where a viewer looks, not at the training si
 
 Everything here is a pure function of the run's files; ``holoflow eval --run`` prints ``table``.
 """
+
 from __future__ import annotations
 
 import math
@@ -37,7 +38,7 @@ import torch
 
 from holoflow.geometry.camera import elevation_deg, polar_views
 
-PAPER_FOV_DEG = 47.43       # focal 582.69 px at 512 px (LucidDreamer / HoloDreamer)
+PAPER_FOV_DEG = 47.43  # focal 582.69 px at 512 px (LucidDreamer / HoloDreamer)
 
 
 @dataclass(frozen=True)
@@ -77,8 +78,9 @@ def view_intrinsics(size: int, fov_deg: float) -> torch.Tensor:
     return intrinsics_from_fov(fov_deg, size, size, dtype=torch.float32)
 
 
-def source_views(pano: torch.Tensor, viewmats: torch.Tensor, K: torch.Tensor, size: int,
-                 supersample: int = 2, chunk: int = 8) -> torch.Tensor:
+def source_views(
+    pano: torch.Tensor, viewmats: torch.Tensor, K: torch.Tensor, size: int, supersample: int = 2, chunk: int = 8
+) -> torch.Tensor:
     """The source's own views: panorama pano [3, H, W] linear light, seen from its centre through
     cameras viewmats [C, 4, 4] with K [3, 3] at size x size px, antialiased (module docstring) ->
     sRGB [C, size, size, 3] in [0, 1]."""
@@ -87,15 +89,17 @@ def source_views(pano: torch.Tensor, viewmats: torch.Tensor, K: torch.Tensor, si
 
     out = []
     for s in range(0, len(viewmats), chunk):
-        vm = viewmats[s:s + chunk].to(pano.dtype)
-        v = equirect_to_pinhole(pano, K.to(pano.dtype).expand(len(vm), 3, 3), vm, size, size,
-                                mode="antialias", supersample=supersample)       # [c, 3, size, size]
+        vm = viewmats[s : s + chunk].to(pano.dtype)
+        v = equirect_to_pinhole(
+            pano, K.to(pano.dtype).expand(len(vm), 3, 3), vm, size, size, mode="antialias", supersample=supersample
+        )  # [c, 3, size, size]
         out.append(linear_to_srgb_torch(v.permute(0, 2, 3, 1).float()))
     return torch.cat(out)
 
 
-def render_at(model, viewmats: torch.Tensor, K: torch.Tensor, size: int, backend: str = "cpu"
-              ) -> tuple[torch.Tensor, torch.Tensor]:
+def render_at(
+    model, viewmats: torch.Tensor, K: torch.Tensor, size: int, backend: str = "cpu"
+) -> tuple[torch.Tensor, torch.Tensor]:
     """A Gaussian model rendered at cameras viewmats [C, 4, 4], K [3, 3], size x size px:
     (sRGB [C, size, size, 3] clamped to [0, 1], alpha [C, size, size])."""
     from holoflow.recon.optimize import render_views
@@ -107,7 +111,7 @@ def render_at(model, viewmats: torch.Tensor, K: torch.Tensor, size: int, backend
 
 def per_camera_psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """PSNR in dB of each image pair [C, H, W, 3] in [0, 1]: [C] float64 (+inf where equal)."""
-    mse = ((pred.double() - target.double()) ** 2).flatten(1).mean(1)              # [C]
+    mse = ((pred.double() - target.double()) ** 2).flatten(1).mean(1)  # [C]
     return -10.0 * torch.log10(mse)
 
 
@@ -130,12 +134,19 @@ def base_scores(renders: torch.Tensor, sources: torch.Tensor, polar: torch.Tenso
         return float(x[m].mean()) if bool(m.any()) else math.nan
 
     pooled = float(-10.0 * torch.log10(((renders[side].double() - sources[side].double()) ** 2).mean()))
-    out = dict(cameras=int(side.sum()), polar_cameras=int(pole.sum()), psnr=mean(p, side), ssim=mean(s, side),
-               psnr_pooled=pooled,
-               polar_psnr=mean(p, pole), polar_ssim=mean(s, pole),
-               polar_worst_psnr=float(p[pole].min()) if bool(pole.any()) else math.nan,
-               per_camera_psnr=[round(float(x), 4) for x in p], per_camera_ssim=[round(float(x), 5) for x in s],
-               polar=[bool(x) for x in polar])
+    out = dict(
+        cameras=int(side.sum()),
+        polar_cameras=int(pole.sum()),
+        psnr=mean(p, side),
+        ssim=mean(s, side),
+        psnr_pooled=pooled,
+        polar_psnr=mean(p, pole),
+        polar_ssim=mean(s, pole),
+        polar_worst_psnr=float(p[pole].min()) if bool(pole.any()) else math.nan,
+        per_camera_psnr=[round(float(x), 4) for x in p],
+        per_camera_ssim=[round(float(x), 5) for x in s],
+        polar=[bool(x) for x in polar],
+    )
     out["polar_gap_db"] = out["psnr"] - out["polar_psnr"]
     return out
 
@@ -177,11 +188,16 @@ def free_distance(depth: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
     from holoflow.geometry.sampling import sample_equirect
 
     d = torch.where(torch.isnan(depth), math.inf, depth).double()
-    return sample_equirect(d[None], dirs[None].double(), mode="nearest")[0, 0]    # [N]
+    return sample_equirect(d[None], dirs[None].double(), mode="nearest")[0, 0]  # [N]
 
 
-def edge_targets(depth: torch.Tensor, cells: tuple[int, int] = (32, 12), max_lat_deg: float = 50.0,
-                 min_step: float = 0.05, max_width: int = 256) -> tuple[torch.Tensor, torch.Tensor]:
+def edge_targets(
+    depth: torch.Tensor,
+    cells: tuple[int, int] = (32, 12),
+    max_lat_deg: float = 50.0,
+    min_step: float = 0.05,
+    max_width: int = 256,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Points on the near side of the strong depth edges of a radial depth panorama depth [H, W]
     (metres; inf / NaN = sky): (points [M, 3] world metres, strength [M]).
 
@@ -196,23 +212,23 @@ def edge_targets(depth: torch.Tensor, cells: tuple[int, int] = (32, 12), max_lat
 
     d = torch.where(torch.isnan(depth), math.inf, depth).double()
     f = max(1, depth.shape[1] // max_width)
-    if f > 1:                                                          # near side kept: min over f x f blocks
+    if f > 1:  # near side kept: min over f x f blocks
         d = -torch.nn.functional.max_pool2d(-d[None, None], f)[0, 0]
     H, W = d.shape
     finite = torch.isfinite(d) & (d > 0)
     far = 2 * float(d[finite].max()) if bool(finite.any()) else 1.0
     ld = torch.log(torch.where(finite, d, torch.full_like(d, far)))
-    right = (ld - torch.roll(ld, -1, 1)).abs()                                          # [H, W] step to x + 1
-    down = torch.nn.functional.pad((ld[:-1] - ld[1:]).abs(), (0, 0, 0, 1))              # [H, W] step to y + 1
+    right = (ld - torch.roll(ld, -1, 1)).abs()  # [H, W] step to x + 1
+    down = torch.nn.functional.pad((ld[:-1] - ld[1:]).abs(), (0, 0, 0, 1))  # [H, W] step to y + 1
     up, below = torch.nn.functional.pad(down[:-1], (0, 0, 1, 0)), torch.nn.functional.pad(down[1:], (0, 0, 0, 1))
-    jump_x = right - 0.5 * (torch.roll(right, 1, 1) + torch.roll(right, -1, 1))          # a slope's steps cancel
+    jump_x = right - 0.5 * (torch.roll(right, 1, 1) + torch.roll(right, -1, 1))  # a slope's steps cancel
     jump_y = down - 0.5 * (up + below)
     strength = torch.maximum(jump_x, jump_y).clamp_min(0.0)
     near = -torch.nn.functional.max_pool2d(-torch.where(finite, d, torch.full_like(d, far))[None, None], 3, 1, 1)[0, 0]
-    lat = 90.0 - 180.0 * (torch.arange(H, dtype=torch.float64) + 0.5) / H                # [H] degrees
+    lat = 90.0 - 180.0 * (torch.arange(H, dtype=torch.float64) + 0.5) / H  # [H] degrees
     rows = torch.nonzero(lat.abs() <= max_lat_deg).flatten()
     r0, r1 = int(rows.min()), int(rows.max()) + 1
-    dirs = equirect_directions(H, W, dtype=torch.float64)                                # [H, W, 3]
+    dirs = equirect_directions(H, W, dtype=torch.float64)  # [H, W, 3]
     pts, strg = [], []
     for i in range(cells[1]):
         for j in range(cells[0]):
@@ -236,14 +252,22 @@ def turn_deg(per_distance: int) -> torch.Tensor:
     direction (positive to the right): 90 (right) to 270 (left) through 180 (back), spread over the
     cameras in a seed-free order that alternates sides: [per_distance] float64."""
     steps = torch.arange(per_distance, dtype=torch.float64)
-    spread = 90.0 + 180.0 * steps / max(per_distance - 1, 1)                             # 90 .. 270
+    spread = 90.0 + 180.0 * steps / max(per_distance - 1, 1)  # 90 .. 270
     order = torch.tensor([(k * 3) % per_distance for k in range(per_distance)]) if per_distance % 3 else steps.long()
     return spread[order]
 
 
-def novel_rig(distances: tuple[float, ...], per_distance: int, seed: int, free=None,
-              pitch_deg: float = 30.0, margin: float = 0.3, targets=None,
-              min_turn_deg: float = 60.0, window_deg: float = 45.0) -> tuple[torch.Tensor, torch.Tensor]:
+def novel_rig(
+    distances: tuple[float, ...],
+    per_distance: int,
+    seed: int,
+    free=None,
+    pitch_deg: float = 30.0,
+    margin: float = 0.3,
+    targets=None,
+    min_turn_deg: float = 60.0,
+    window_deg: float = 45.0,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Novel cameras off the centre: (viewmats [D * per_distance, 4, 4] float32, offsets [D * per] m).
 
     For camera k of a distance d: the eye moves horizontally (at the centre's height) along azimuth
@@ -265,8 +289,8 @@ def novel_rig(distances: tuple[float, ...], per_distance: int, seed: int, free=N
     g = torch.Generator().manual_seed(seed)
     phi = float(torch.rand(1, generator=g, dtype=torch.float64)) * 2 * math.pi / per_distance
     pitch = (torch.rand(per_distance, generator=g, dtype=torch.float64) * 2 - 1) * math.radians(pitch_deg)
-    az = phi + 2 * math.pi * torch.arange(per_distance, dtype=torch.float64) / per_distance   # [P]
-    move = torch.stack([torch.sin(az), torch.zeros_like(az), torch.cos(az)], 1)              # [P, 3] +y is down
+    az = phi + 2 * math.pi * torch.arange(per_distance, dtype=torch.float64) / per_distance  # [P]
+    move = torch.stack([torch.sin(az), torch.zeros_like(az), torch.cos(az)], 1)  # [P, 3] +y is down
     if targets is None:
         turn = az + (math.pi / 2) * (torch.arange(per_distance) % 4).double()
     else:
@@ -274,11 +298,11 @@ def novel_rig(distances: tuple[float, ...], per_distance: int, seed: int, free=N
     look = torch.stack([torch.sin(turn) * torch.cos(pitch), -torch.sin(pitch), torch.cos(turn) * torch.cos(pitch)], 1)
     aim = None
     if targets is not None:
-        aim = pick_targets(targets, move, turn, g, min_turn_deg, window_deg)               # [P, 3], NaN = none
+        aim = pick_targets(targets, move, turn, g, min_turn_deg, window_deg)  # [P, 3], NaN = none
     room = torch.full((per_distance,), math.inf, dtype=torch.float64) if free is None else free(move).double()
     vms, offs = [], []
     for d in distances:
-        off = torch.clamp(torch.minimum(torch.full_like(room, float(d)), room - margin), min=0.0)   # [P]
+        off = torch.clamp(torch.minimum(torch.full_like(room, float(d)), room - margin), min=0.0)  # [P]
         eye = move * off[:, None]
         at = eye + look
         if aim is not None:
@@ -289,34 +313,41 @@ def novel_rig(distances: tuple[float, ...], per_distance: int, seed: int, free=N
     return torch.cat(vms).float(), torch.cat(offs)
 
 
-def pick_targets(targets, move: torch.Tensor, turn: torch.Tensor, g: torch.Generator, min_turn_deg: float,
-                 window_deg: float) -> torch.Tensor:
+def pick_targets(
+    targets, move: torch.Tensor, turn: torch.Tensor, g: torch.Generator, min_turn_deg: float, window_deg: float
+) -> torch.Tensor:
     """The edge point each camera looks at (``novel_rig``): points [M, 3] and strength [M] of
     ``targets``, unit moves [P, 3], preferred azimuths turn [P] radians -> [P, 3] (NaN rows: no point
     qualifies). Consumes P x M seeded uniforms from ``g``."""
     pts, strength = targets
     pts, strength = pts.double(), strength.double()
     P, M = len(move), len(pts)
-    jitter = 0.5 + 0.5 * torch.rand(P, M, generator=g, dtype=torch.float64)                 # [P, M]
+    jitter = 0.5 + 0.5 * torch.rand(P, M, generator=g, dtype=torch.float64)  # [P, M]
     out = torch.full((P, 3), math.nan, dtype=torch.float64)
     if M == 0:
         return out
     flat = pts * torch.tensor([1.0, 0.0, 1.0], dtype=torch.float64)
-    flat = flat / flat.norm(dim=1, keepdim=True).clamp_min(1e-9)                             # [M, 3] horizontal
-    taz = torch.atan2(flat[:, 0], flat[:, 2])                                                # [M]
-    off_pref = torch.remainder(taz[None] - turn[:, None] + math.pi, 2 * math.pi) - math.pi     # [P, M]
-    cos_move = flat @ move.T                                                                 # [M, P]
+    flat = flat / flat.norm(dim=1, keepdim=True).clamp_min(1e-9)  # [M, 3] horizontal
+    taz = torch.atan2(flat[:, 0], flat[:, 2])  # [M]
+    off_pref = torch.remainder(taz[None] - turn[:, None] + math.pi, 2 * math.pi) - math.pi  # [P, M]
+    cos_move = flat @ move.T  # [M, P]
     ok = (off_pref.abs() <= math.radians(window_deg)) & (cos_move.T <= math.cos(math.radians(min_turn_deg)))
     score = torch.where(ok, strength[None] * jitter, torch.full_like(jitter, -1.0))
-    best = score.argmax(1)                                                                   # [P]
+    best = score.argmax(1)  # [P]
     has = ok.any(1)
     out[has] = pts[best[has]]
     return out
 
 
-def novel_scores(alpha: torch.Tensor, offsets: torch.Tensor, distances: tuple[float, ...], empty_alpha: float,
-                 renders: torch.Tensor | None = None, truth: torch.Tensor | None = None,
-                 crack_alpha: float = 0.9) -> dict:
+def novel_scores(
+    alpha: torch.Tensor,
+    offsets: torch.Tensor,
+    distances: tuple[float, ...],
+    empty_alpha: float,
+    renders: torch.Tensor | None = None,
+    truth: torch.Tensor | None = None,
+    crack_alpha: float = 0.9,
+) -> dict:
     """Per distance (key f"{d:g}"): empty = fraction of the pixels of its cameras (alpha [C, H, W], the
     ``novel_rig`` order) whose alpha < ``empty_alpha``, cracked = those with alpha < ``crack_alpha``,
     per-camera empties and cracks, the mean actual offset (m), and with truth [C, H, W, 3] PSNR of
@@ -329,9 +360,14 @@ def novel_scores(alpha: torch.Tensor, offsets: torch.Tensor, distances: tuple[fl
         sl = slice(i * P, (i + 1) * P)
         empty = (alpha[sl] < empty_alpha).double()
         crack = (alpha[sl] < crack_alpha).double()
-        r = dict(cameras=P, empty=float(empty.mean()), cracked=float(crack.mean()), offset_m=float(offsets[sl].mean()),
-                 per_camera_empty=[round(float(e), 5) for e in empty.flatten(1).mean(1)],
-                 per_camera_cracked=[round(float(e), 5) for e in crack.flatten(1).mean(1)])
+        r = dict(
+            cameras=P,
+            empty=float(empty.mean()),
+            cracked=float(crack.mean()),
+            offset_m=float(offsets[sl].mean()),
+            per_camera_empty=[round(float(e), 5) for e in empty.flatten(1).mean(1)],
+            per_camera_cracked=[round(float(e), 5) for e in crack.flatten(1).mean(1)],
+        )
         if truth is not None and renders is not None:
             r["psnr"] = metrics.psnr(renders[sl], truth[sl])
         out[f"{d:g}"] = r
@@ -343,7 +379,7 @@ class Source:
     """The panorama a run's renders are judged against: linear RGB [3, H, W], what it is, and notes."""
 
     pano: torch.Tensor
-    kind: str                 # "photo FILE" or "detail panorama"
+    kind: str  # "photo FILE" or "detail panorama"
     notes: list[str] = field(default_factory=list)
 
 
@@ -364,17 +400,23 @@ def run_source(run_dir: Path, run_info: dict) -> Source:
 
             rgb, facts = read_panorama_image(src)
             if want is None or facts["sha256"] == want:
-                return Source(torch.from_numpy(rgb).permute(2, 0, 1).contiguous(),
-                              f"photo {src.name} ({facts['size'][0]}x{facts['size'][1]})")
+                return Source(
+                    torch.from_numpy(rgb).permute(2, 0, 1).contiguous(),
+                    f"photo {src.name} ({facts['size'][0]}x{facts['size'][1]})",
+                )
             note = f"{src} changed since the run (sha256 differs); scored against the imported copy"
         else:
             note = f"{src} not readable as a photo; scored against the run's imported base panorama"
         rgb = read_rgb(imported)
-        return Source(torch.from_numpy(rgb).permute(2, 0, 1).contiguous(),
-                      f"imported base panorama ({rgb.shape[1]}x{rgb.shape[0]})", [note])
+        return Source(
+            torch.from_numpy(rgb).permute(2, 0, 1).contiguous(),
+            f"imported base panorama ({rgb.shape[1]}x{rgb.shape[0]})",
+            [note],
+        )
     rgb = read_rgb(run_dir / "detail" / "pano.exr")
-    return Source(torch.from_numpy(rgb).permute(2, 0, 1).contiguous(),
-                  f"detail panorama ({rgb.shape[1]}x{rgb.shape[0]})")
+    return Source(
+        torch.from_numpy(rgb).permute(2, 0, 1).contiguous(), f"detail panorama ({rgb.shape[1]}x{rgb.shape[0]})"
+    )
 
 
 def base_camera_viewmats(run_dir: Path) -> torch.Tensor:
@@ -403,8 +445,9 @@ def true_novel(run_dir: Path, viewmats: torch.Tensor, K: torch.Tensor, size: int
     return linear_to_srgb_torch(torch.stack(views))
 
 
-def score_run(run_dir: Path, run_info: dict, spec: ViewingSpec = ViewingSpec(),
-              model_file: str = "transfer_opt/scene.ply") -> tuple[dict, dict]:
+def score_run(
+    run_dir: Path, run_info: dict, spec: ViewingSpec = ViewingSpec(), model_file: str = "transfer_opt/scene.ply"
+) -> tuple[dict, dict]:
     """Score a finished run folder (runs/<id>/) at the viewing size (module docstring).
     Returns (scores: base / nr / novel / source / spec / seconds per part, pictures: source and render
     [C, size, size, 3] at the base cameras, polar [C], novel renders and alpha, truth or None)."""
@@ -441,8 +484,9 @@ def score_run(run_dir: Path, run_info: dict, spec: ViewingSpec = ViewingSpec(),
         depth = torch.from_numpy(read_exr(depth_file)[0]["Z"])
         free = lambda dirs: free_distance(depth, dirs)  # noqa: E731
         targets = edge_targets(depth)
-    nvm, offsets = novel_rig(spec.distances, spec.per_distance, spec.seed, free, spec.pitch_deg, spec.wall_margin,
-                             targets)
+    nvm, offsets = novel_rig(
+        spec.distances, spec.per_distance, spec.seed, free, spec.pitch_deg, spec.wall_margin, targets
+    )
     nrgb, nalpha = render_at(model, nvm, K, spec.size, spec.backend)
     t["render_novel"] = time.monotonic() - t0
     t0 = time.monotonic()
@@ -455,10 +499,18 @@ def score_run(run_dir: Path, run_info: dict, spec: ViewingSpec = ViewingSpec(),
             sl = slice(i * spec.per_distance, (i + 1) * spec.per_distance)
             r["nr"] = nr_scores(nrgb[sl], sources[pick])
     t["novel_niqe_brisque"] = time.monotonic() - t0
-    scores = dict(base=base, nr=nr, novel=novel, source=src.kind, notes=src.notes, gaussians=len(model),
-                  spec={k: list(v) if isinstance(v, tuple) else v for k, v in asdict(spec).items()},
-                  seconds=t, depth_for_novel=depth_file.is_file(),
-                  edge_targets=0 if targets is None else len(targets[0]))
+    scores = dict(
+        base=base,
+        nr=nr,
+        novel=novel,
+        source=src.kind,
+        notes=src.notes,
+        gaussians=len(model),
+        spec={k: list(v) if isinstance(v, tuple) else v for k, v in asdict(spec).items()},
+        seconds=t,
+        depth_for_novel=depth_file.is_file(),
+        edge_targets=0 if targets is None else len(targets[0]),
+    )
     pictures = dict(source=sources, render=renders, polar=polar, novel=nrgb, novel_alpha=nalpha, truth=truth)
     return scores, pictures
 
@@ -498,35 +550,50 @@ def table(scores: dict, profile: str | None) -> list[str]:
             why = nr.get("unavailable", {}).get(key, "not measured (size < 192 px)")
             rows.append(f"  {key.upper() + ' render / source':42s}{'-':>10s}   {why}")
             continue
-        row(f"{key.upper()} render / source ({r['render']:.1f} / {r['source']:.1f})", r["ratio"], "{:.2f}x",
-            g.get(key), at_most=True)
+        row(
+            f"{key.upper()} render / source ({r['render']:.1f} / {r['source']:.1f})",
+            r["ratio"],
+            "{:.2f}x",
+            g.get(key),
+            at_most=True,
+        )
     row(f"zenith/nadir PSNR dB ({b['polar_cameras']} cameras)", b["polar_psnr"], "{:.2f}")
     row("zenith/nadir gap below the others dB", b["polar_gap_db"], "{:.2f}", g.get("polar_gap"), at_most=True)
     row("zenith/nadir SSIM", b["polar_ssim"], "{:.4f}")
     for d, r in nv.items():
         goal = g.get("empty_0.5") if d == "0.5" else None
-        row(f"novel {d} m empty % ({r['cameras']} cams, {r['offset_m']:.2f} m)", 100 * r["empty"], "{:.2f} %",
-            None if goal is None else 100 * goal, at_most=True)
+        row(
+            f"novel {d} m empty % ({r['cameras']} cams, {r['offset_m']:.2f} m)",
+            100 * r["empty"],
+            "{:.2f} %",
+            None if goal is None else 100 * goal,
+            at_most=True,
+        )
         if "cracked" in r:
             row(f"novel {d} m alpha < {s.get('crack_alpha', 0.9)} %", 100 * r["cracked"], "{:.2f} %")
         for key in ("niqe", "brisque"):
             x = (r.get("nr") or {}).get(key)
             if x is not None:
-                row(f"novel {d} m {key.upper()} / source ({x['render']:.1f} / {x['source']:.1f})", x["ratio"],
-                    "{:.2f}x")
+                row(
+                    f"novel {d} m {key.upper()} / source ({x['render']:.1f} / {x['source']:.1f})", x["ratio"], "{:.2f}x"
+                )
         if "psnr" in r:
             row(f"novel {d} m PSNR dB vs truth", r["psnr"], "{:.2f}")
-    head = [f"viewing size {s['size']} px, {s['fov_deg']} deg horizontal field of view; source: {scores['source']}; "
-            f"{scores['gaussians']} Gaussians",
-            f"  {'':42s}{'measured':>10s}   goal ({name})"]
-    foot = [f"PSNR / SSIM: means of the per-camera values over the base cameras more than {s['pole_deg']} deg from "
-            "the poles (sRGB; pooled: the PSNR of their pooled squared error, which easy flat views do not lift); "
-            f"zenith/nadir: the cameras within {s['pole_deg']} deg of them. NIQE / BRISQUE (lower is better): means "
-            f"over {nr.get('cameras', 0)} of those cameras, render / source. Empty: alpha < {s['empty_alpha']}; "
-            f"novel eyes move horizontally (<= {s['wall_margin']} m short of the run's depth) and look sideways or "
-            f"back at the depth's edges ({scores.get('edge_targets', 0)} found), seed {s['seed']}; their NIQE / "
-            "BRISQUE: against the same source views.",
-            "Paper Table II (at 512 px, its own generated panoramas): PSNR 40.19 dB, SSIM 0.984."]
+    head = [
+        f"viewing size {s['size']} px, {s['fov_deg']} deg horizontal field of view; source: {scores['source']}; "
+        f"{scores['gaussians']} Gaussians",
+        f"  {'':42s}{'measured':>10s}   goal ({name})",
+    ]
+    foot = [
+        f"PSNR / SSIM: means of the per-camera values over the base cameras more than {s['pole_deg']} deg from "
+        "the poles (sRGB; pooled: the PSNR of their pooled squared error, which easy flat views do not lift); "
+        f"zenith/nadir: the cameras within {s['pole_deg']} deg of them. NIQE / BRISQUE (lower is better): means "
+        f"over {nr.get('cameras', 0)} of those cameras, render / source. Empty: alpha < {s['empty_alpha']}; "
+        f"novel eyes move horizontally (<= {s['wall_margin']} m short of the run's depth) and look sideways or "
+        f"back at the depth's edges ({scores.get('edge_targets', 0)} found), seed {s['seed']}; their NIQE / "
+        "BRISQUE: against the same source views.",
+        "Paper Table II (at 512 px, its own generated panoramas): PSNR 40.19 dB, SSIM 0.984.",
+    ]
     return head + rows + [f"  note: {n}" for n in scores.get("notes", [])] + foot
 
 

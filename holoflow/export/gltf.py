@@ -12,6 +12,7 @@ coefficient: rgb = 0.5 + SH_C0 * dc) and, for degree l > 0, ``..:SH_DEGREE_l_COE
 the extension object says kernel ``ellipse``, colour space ``srgb_rec709_display`` (3DGS colours are
 display values), projection ``perspective``, sorting ``cameraDistance``.
 """
+
 from __future__ import annotations
 
 import json
@@ -33,8 +34,12 @@ class GlbBuilder:
 
     def __init__(self):
         self.blob = bytearray()
-        self.gltf = {"asset": {"version": "2.0", "generator": "holoflow"}, "buffers": [], "bufferViews": [],
-                     "accessors": []}
+        self.gltf = {
+            "asset": {"version": "2.0", "generator": "holoflow"},
+            "buffers": [],
+            "bufferViews": [],
+            "accessors": [],
+        }
 
     def accessor(self, data: np.ndarray, target: int | None = None, minmax: bool = False) -> int:
         """Add ``data`` [N] or [N, C] (float32 or uint32) as its own buffer view; its accessor index."""
@@ -50,20 +55,29 @@ class GlbBuilder:
             view["target"] = target
         self.blob += data.astype(data.dtype.newbyteorder("<")).tobytes()
         self.gltf["bufferViews"].append(view)
-        acc = {"bufferView": len(self.gltf["bufferViews"]) - 1, "componentType": ctype,
-               "count": int(data.shape[0]), "type": _TYPES[comps]}
+        acc = {
+            "bufferView": len(self.gltf["bufferViews"]) - 1,
+            "componentType": ctype,
+            "count": int(data.shape[0]),
+            "type": _TYPES[comps],
+        }
         if minmax and len(data):
             flat = data.reshape(len(data), -1)
             acc["min"], acc["max"] = flat.min(0).tolist(), flat.max(0).tolist()
         self.gltf["accessors"].append(acc)
         return len(self.gltf["accessors"]) - 1
 
-    def glb(self, primitive: dict, extensions: list[str] = (), materials: list[dict] | None = None,
-            name: str = "holoflow") -> bytes:
+    def glb(
+        self, primitive: dict, extensions: list[str] = (), materials: list[dict] | None = None, name: str = "holoflow"
+    ) -> bytes:
         """The GLB bytes of one scene -> one node -> one mesh holding ``primitive``."""
         g = dict(self.gltf)
-        g.update(scene=0, scenes=[{"nodes": [0]}], nodes=[{"mesh": 0, "name": name}],
-                 meshes=[{"name": name, "primitives": [primitive]}])
+        g.update(
+            scene=0,
+            scenes=[{"nodes": [0]}],
+            nodes=[{"mesh": 0, "name": name}],
+            meshes=[{"name": name, "primitives": [primitive]}],
+        )
         g["buffers"] = [{"byteLength": len(self.blob)}]
         if extensions:
             g["extensionsUsed"] = list(extensions)
@@ -73,8 +87,13 @@ class GlbBuilder:
         js += b" " * (-len(js) % 4)
         bin_ = bytes(self.blob) + b"\0" * (-len(self.blob) % 4)
         total = 12 + 8 + len(js) + 8 + len(bin_)
-        return (struct.pack("<III", 0x46546C67, 2, total) + struct.pack("<II", len(js), 0x4E4F534A) + js
-                + struct.pack("<II", len(bin_), 0x004E4942) + bin_)
+        return (
+            struct.pack("<III", 0x46546C67, 2, total)
+            + struct.pack("<II", len(js), 0x4E4F534A)
+            + js
+            + struct.pack("<II", len(bin_), 0x004E4942)
+            + bin_
+        )
 
 
 def gaussians_glb_bytes(s: Splats) -> bytes:
@@ -82,19 +101,26 @@ def gaussians_glb_bytes(s: Splats) -> bytes:
     s = to_y_up(s)
     b = GlbBuilder()
     f32 = lambda a: np.asarray(a, np.float32)  # noqa: E731
-    attrs = {"POSITION": b.accessor(f32(s.means), ARRAY_BUFFER, minmax=True),
-             "KHR_gaussian_splatting:ROTATION": b.accessor(f32(s.quats[:, [1, 2, 3, 0]]), ARRAY_BUFFER),
-             "KHR_gaussian_splatting:SCALE": b.accessor(f32(s.scales), ARRAY_BUFFER),
-             "KHR_gaussian_splatting:OPACITY": b.accessor(f32(s.opacities), ARRAY_BUFFER),
-             "KHR_gaussian_splatting:SH_DEGREE_0_COEF_0": b.accessor(f32(s.sh_dc), ARRAY_BUFFER)}
+    attrs = {
+        "POSITION": b.accessor(f32(s.means), ARRAY_BUFFER, minmax=True),
+        "KHR_gaussian_splatting:ROTATION": b.accessor(f32(s.quats[:, [1, 2, 3, 0]]), ARRAY_BUFFER),
+        "KHR_gaussian_splatting:SCALE": b.accessor(f32(s.scales), ARRAY_BUFFER),
+        "KHR_gaussian_splatting:OPACITY": b.accessor(f32(s.opacities), ARRAY_BUFFER),
+        "KHR_gaussian_splatting:SH_DEGREE_0_COEF_0": b.accessor(f32(s.sh_dc), ARRAY_BUFFER),
+    }
     k = 0
     for degree in range(1, s.sh_degree + 1):
         for coef in range(2 * degree + 1):
-            attrs[f"KHR_gaussian_splatting:SH_DEGREE_{degree}_COEF_{coef}"] = b.accessor(f32(s.sh_rest[:, k]),
-                                                                                       ARRAY_BUFFER)
+            attrs[f"KHR_gaussian_splatting:SH_DEGREE_{degree}_COEF_{coef}"] = b.accessor(
+                f32(s.sh_rest[:, k]), ARRAY_BUFFER
+            )
             k += 1
-    ext = {"kernel": "ellipse", "colorSpace": "srgb_rec709_display", "projection": "perspective",
-           "sortingMethod": "cameraDistance"}
+    ext = {
+        "kernel": "ellipse",
+        "colorSpace": "srgb_rec709_display",
+        "projection": "perspective",
+        "sortingMethod": "cameraDistance",
+    }
     primitive = {"mode": POINTS, "attributes": attrs, "extensions": {"KHR_gaussian_splatting": ext}}
     return b.glb(primitive, extensions=["KHR_gaussian_splatting"], name="gaussians")
 
@@ -105,12 +131,16 @@ def mesh_glb_bytes(vertices: np.ndarray, colors: np.ndarray, faces: np.ndarray) 
     vertex indices, counter-clockwise seen from the side a viewer should see (glTF's front face).
     The material is unlit (KHR_materials_unlit): the colours are the panorama's captured light."""
     b = GlbBuilder()
-    attrs = {"POSITION": b.accessor(np.asarray(vertices @ Y_UP, np.float32), ARRAY_BUFFER, minmax=True),
-             "COLOR_0": b.accessor(np.asarray(np.clip(colors, 0, 1), np.float32), ARRAY_BUFFER)}
+    attrs = {
+        "POSITION": b.accessor(np.asarray(vertices @ Y_UP, np.float32), ARRAY_BUFFER, minmax=True),
+        "COLOR_0": b.accessor(np.asarray(np.clip(colors, 0, 1), np.float32), ARRAY_BUFFER),
+    }
     indices = b.accessor(np.asarray(faces, np.uint32).reshape(-1), ELEMENT_ARRAY_BUFFER)
-    material = {"name": "vertex_colour_unlit", "doubleSided": False,
-                "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0.0,
-                                         "roughnessFactor": 1.0},
-                "extensions": {"KHR_materials_unlit": {}}}
+    material = {
+        "name": "vertex_colour_unlit",
+        "doubleSided": False,
+        "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0.0, "roughnessFactor": 1.0},
+        "extensions": {"KHR_materials_unlit": {}},
+    }
     primitive = {"mode": TRIANGLES, "attributes": attrs, "indices": indices, "material": 0}
     return b.glb(primitive, extensions=["KHR_materials_unlit"], materials=[material], name="panorama_mesh")

@@ -10,14 +10,16 @@ left out or put on a dome of ``sky_radius``; a triangle joining sky and ground i
 Triangles are wound counter-clockwise seen from the panorama's centre: their fronts face the viewer
 inside the room (glTF's front face).
 """
+
 from __future__ import annotations
 
 import numpy as np
 import torch
 
 
-def rgbd_mesh(rgb: np.ndarray, radial_depth: np.ndarray, edge_threshold: float = 0.4, sky: str = "dome",
-              sky_radius: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def rgbd_mesh(
+    rgb: np.ndarray, radial_depth: np.ndarray, edge_threshold: float = 0.4, sky: str = "dome", sky_radius: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """rgb [H, W, 3] (any colour space, passed through), radial_depth [H, W] metres (inf = sky) ->
     vertices [V, 3] float64 (holoflow's frame, metres), colors [V, 3] float64, faces [F, 3] int64.
     ``sky``: "dome" (sky on a sphere of ``sky_radius``, 0 = 2x the 99th percentile depth) or "omit".
@@ -34,7 +36,7 @@ def rgbd_mesh(rgb: np.ndarray, radial_depth: np.ndarray, edge_threshold: float =
         raise ValueError("the depth map has no finite positive pixel: no mesh to build")
     radius = sky_radius if sky_radius > 0 else far_shell_radius(torch.from_numpy(depth))
     d = np.where(bounded, depth, radius)
-    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()            # [H, W, 3]
+    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
     verts = (dirs * d[..., None]).reshape(-1, 3)
     cols = np.asarray(rgb, np.float64).reshape(-1, 3)
     is_sky = ~bounded.reshape(-1)
@@ -58,19 +60,19 @@ def rgbd_mesh(rgb: np.ndarray, radial_depth: np.ndarray, edge_threshold: float =
     tris = [np.stack([p00, p10, p01], -1).reshape(-1, 3), np.stack([p01, p10, p11], -1).reshape(-1, 3)]
     u1 = np.arange(W)
     top, bottom = H * W, H * W + 1
-    tris.append(np.stack([np.full(W, top), u1, (u1 + 1) % W], -1))                       # top fan
+    tris.append(np.stack([np.full(W, top), u1, (u1 + 1) % W], -1))  # top fan
     last = (H - 1) * W
-    tris.append(np.stack([np.full(W, bottom), last + (u1 + 1) % W, last + u1], -1))      # bottom fan
+    tris.append(np.stack([np.full(W, bottom), last + (u1 + 1) % W, last + u1], -1))  # bottom fan
     faces = np.concatenate(tris)
     # orient the fans by geometry (the grid is wound analytically): normal . centroid < 0 faces the centre
     fan = np.zeros(len(faces), bool)
-    fan[-2 * W:] = True
+    fan[-2 * W :] = True
     a, b, c = verts[faces[:, 0]], verts[faces[:, 1]], verts[faces[:, 2]]
     outward = np.einsum("ij,ij->i", np.cross(b - a, c - a), a + b + c) > 0
     flip = fan & outward
     faces[flip] = faces[flip][:, [0, 2, 1]]
     # cut discontinuities, sky/ground seams, and (omit) sky
-    fd = dflat[faces]                                                         # [F, 3]
+    fd = dflat[faces]  # [F, 3]
     fs = is_sky[faces]
     spread = (fd.max(1) - fd.min(1)) / fd.min(1)
     keep = (fs.all(1) | ~fs.any(1)) & (spread <= edge_threshold)
@@ -83,8 +85,14 @@ def rgbd_mesh(rgb: np.ndarray, radial_depth: np.ndarray, edge_threshold: float =
     return verts[used], cols[used], remap[faces].astype(np.int64)
 
 
-def panorama_mesh_glb(rgb: np.ndarray, radial_depth: np.ndarray, width: int = 0, edge_threshold: float = 0.4,
-                      sky: str = "dome", sky_radius: float = 0.0) -> tuple[bytes, dict]:
+def panorama_mesh_glb(
+    rgb: np.ndarray,
+    radial_depth: np.ndarray,
+    width: int = 0,
+    edge_threshold: float = 0.4,
+    sky: str = "dome",
+    sky_radius: float = 0.0,
+) -> tuple[bytes, dict]:
     """mesh.glb's bytes and facts (grid, vertex and face counts) for a panorama: rgb [H, W, 3] linear,
     radial_depth [h, w] metres (inf = sky), both resampled to ``width`` x ``width // 2`` (0 = half the
     depth's width, P_f's resolution; colour antialiased, depth point-sampled), then :func:`rgbd_mesh`."""
@@ -94,6 +102,9 @@ def panorama_mesh_glb(rgb: np.ndarray, radial_depth: np.ndarray, width: int = 0,
     depth = torch.from_numpy(np.asarray(radial_depth)).double()
     col, d = resample_rgbd(torch.from_numpy(np.asarray(rgb)).double(), depth, width or max(2, depth.shape[1] // 2))
     verts, cols, faces = rgbd_mesh(col.clamp(0, 1).numpy(), d.numpy(), edge_threshold, sky, sky_radius)
-    info = {"mesh_grid": [int(d.shape[0]), int(d.shape[1])], "mesh_vertices": int(len(verts)),
-            "mesh_faces": int(len(faces))}
+    info = {
+        "mesh_grid": [int(d.shape[0]), int(d.shape[1])],
+        "mesh_vertices": int(len(verts)),
+        "mesh_faces": int(len(faces)),
+    }
     return mesh_glb_bytes(verts, cols, faces), info

@@ -16,6 +16,7 @@ them like the INRIA PLY, so they keep holoflow's frame, as ``scene.ply`` does.
 Colour. 3DGS colour is ``rgb = 0.5 + SH_C0 * f_dc``: sRGB display values (docs/conventions.md);
 every format here stores those, quantised as it specifies.
 """
+
 from __future__ import annotations
 
 import gzip
@@ -41,6 +42,7 @@ class Splats:
     means [N, 3] metres; scales [N, 3] metres (linear, > 0); quats [N, 4] unit (w, x, y, z);
     opacities [N] in (0, 1); sh_dc [N, 3] (rgb = 0.5 + SH_C0 * sh_dc, sRGB display values);
     sh_rest [N, K - 1, 3], K = (sh_degree + 1)^2, coefficient-major (3DGS order)."""
+
     means: np.ndarray
     scales: np.ndarray
     quats: np.ndarray
@@ -61,8 +63,7 @@ class Splats:
         return self.means.shape[0]
 
     def subset(self, index: np.ndarray) -> "Splats":
-        return Splats(*(getattr(self, k)[index] for k in ("means", "scales", "quats", "opacities", "sh_dc",
-                                                         "sh_rest")))
+        return Splats(*(getattr(self, k)[index] for k in ("means", "scales", "quats", "opacities", "sh_dc", "sh_rest")))
 
 
 def activate(fields: dict[str, np.ndarray]) -> Splats:
@@ -73,7 +74,7 @@ def activate(fields: dict[str, np.ndarray]) -> Splats:
     n = len(fields["x"])
     n_rest = sum(1 for k in fields if k.startswith("f_rest_"))
     K = n_rest // 3 + 1
-    if n_rest % 3 or int(round(K ** 0.5)) ** 2 != K or K > 16:
+    if n_rest % 3 or int(round(K**0.5)) ** 2 != K or K > 16:
         raise ValueError(f"{n_rest} f_rest values do not form SH bands of degree <= 3")
     means = col("xyz")
     log_scales = col([f"scale_{i}" for i in range(3)])
@@ -81,22 +82,34 @@ def activate(fields: dict[str, np.ndarray]) -> Splats:
     logits = np.asarray(fields["opacity"], np.float64)
     dc = col([f"f_dc_{i}" for i in range(3)])
     rest = col([f"f_rest_{i}" for i in range(n_rest)]) if n_rest else np.zeros((n, 0))
-    for name, a in (("position", means), ("scale", log_scales), ("rotation", quats), ("opacity", logits),
-                    ("colour", dc), ("SH", rest)):
+    for name, a in (
+        ("position", means),
+        ("scale", log_scales),
+        ("rotation", quats),
+        ("opacity", logits),
+        ("colour", dc),
+        ("SH", rest),
+    ):
         if not np.isfinite(a).all():
             raise ValueError(f"the scene has non-finite {name} values: nothing exported")
     norm = np.linalg.norm(quats, axis=1, keepdims=True)
     quats = np.where(norm > 1e-12, quats / np.maximum(norm, 1e-12), np.array([1.0, 0, 0, 0]))
-    return Splats(means=means, scales=np.exp(log_scales), quats=quats,
-                  opacities=1.0 / (1.0 + np.exp(-logits)), sh_dc=dc,
-                  sh_rest=rest.reshape(n, 3, K - 1).transpose(0, 2, 1).copy())
+    return Splats(
+        means=means,
+        scales=np.exp(log_scales),
+        quats=quats,
+        opacities=1.0 / (1.0 + np.exp(-logits)),
+        sh_dc=dc,
+        sh_rest=rest.reshape(n, 3, K - 1).transpose(0, 2, 1).copy(),
+    )
 
 
 def to_y_up(s: Splats) -> Splats:
     """The same Gaussians in the +Y-up frame (x right, y up, z back): module docstring."""
     k = s.sh_rest.shape[1]
-    return replace(s, means=s.means @ Y_UP, quats=s.quats * np.array([1.0, 1.0, -1.0, -1.0]),
-                   sh_rest=s.sh_rest * SH_FLIP[:k, None])
+    return replace(
+        s, means=s.means @ Y_UP, quats=s.quats * np.array([1.0, 1.0, -1.0, -1.0]), sh_rest=s.sh_rest * SH_FLIP[:k, None]
+    )
 
 
 # -- antimatter15 .splat ---------------------------------------------------------------------------
@@ -121,7 +134,7 @@ def splat_bytes(s: Splats) -> bytes:
 
 
 # -- Niantic SPZ (version 3, gzip container) -------------------------------------------------------
-SPZ_MAGIC = 0x5053474E        # "NGSP"
+SPZ_MAGIC = 0x5053474E  # "NGSP"
 SPZ_VERSION = 3
 SPZ_COLOR_SCALE = 0.15
 
@@ -142,13 +155,13 @@ def spz_bytes(s: Splats, fractional_bits: int = 12) -> bytes:
         bits -= 1
     if round(extent * (1 << bits)) >= 1 << 23:
         raise ValueError(f"scene extent {extent:.3g} m does not fit SPZ's 24-bit positions")
-    fixed = np.round(s.means * (1 << bits)).astype(np.int64) & 0xFFFFFF       # [N, 3] two's complement
+    fixed = np.round(s.means * (1 << bits)).astype(np.int64) & 0xFFFFFF  # [N, 3] two's complement
     positions = np.stack([(fixed >> sh) & 0xFF for sh in (0, 8, 16)], -1).astype(np.uint8)  # [N, 3, 3]
     alphas = _u8(s.opacities * 255.0)
     colors = _u8(s.sh_dc * (SPZ_COLOR_SCALE * 255.0) + 127.5)
     scales = _u8((np.log(s.scales) + 10.0) * 16.0)
     rotations = _smallest_three_spz(s.quats)
-    sh = _u8(s.sh_rest * 128.0 + 128.0)                                      # [N, K - 1, 3]
+    sh = _u8(s.sh_rest * 128.0 + 128.0)  # [N, K - 1, 3]
     header = struct.pack("<IIIBBBB", SPZ_MAGIC, SPZ_VERSION, n, s.sh_degree, bits, 0, 0)
     body = b"".join(a.tobytes() for a in (positions, alphas, colors, scales, rotations, sh))
     return gzip.compress(header + body, compresslevel=6, mtime=0)
@@ -156,7 +169,7 @@ def spz_bytes(s: Splats, fractional_bits: int = 12) -> bytes:
 
 def _smallest_three_spz(quats_wxyz: np.ndarray) -> np.ndarray:
     """[N, 4] unit (w, x, y, z) -> [N, 4] u8 (a little-endian u32 each): SPZ v3's packing of (x, y, z, w)."""
-    q = quats_wxyz[:, [1, 2, 3, 0]]                                        # SPZ order (x, y, z, w)
+    q = quats_wxyz[:, [1, 2, 3, 0]]  # SPZ order (x, y, z, w)
     largest = np.argmax(np.abs(q), axis=1)
     q = q * np.where(q[np.arange(len(q)), largest] < 0, -1.0, 1.0)[:, None]  # largest positive
     packed = np.zeros(len(q), np.uint64)
@@ -193,7 +206,7 @@ def compressed_ply_bytes(s: Splats) -> bytes:
         parts = []
         for j, values in enumerate((s.means[sl], log_scales[sl], rgb[sl])):
             lo, hi = values.min(0).astype(np.float32), values.max(0).astype(np.float32)
-            chunk[c, 6 * j: 6 * j + 3], chunk[c, 6 * j + 3: 6 * j + 6] = lo, hi
+            chunk[c, 6 * j : 6 * j + 3], chunk[c, 6 * j + 3 : 6 * j + 6] = lo, hi
             span = (hi - lo).astype(np.float64)
             parts.append(np.where(span > 0, (values - lo) / np.where(span > 0, span, 1.0), 0.0))
         pos, scl, col = parts
@@ -202,11 +215,35 @@ def compressed_ply_bytes(s: Splats) -> bytes:
         col8 = _u8(np.concatenate([col, s.opacities[sl, None]], 1) * 255.0).astype(np.uint32)
         packed[sl, 3] = (col8[:, 0] << 24) | (col8[:, 1] << 16) | (col8[:, 2] << 8) | col8[:, 3]
     packed[:, 1] = _smallest_three_playcanvas(s.quats)
-    names = ["min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x", "min_scale_y", "min_scale_z",
-             "max_scale_x", "max_scale_y", "max_scale_z", "min_r", "min_g", "min_b", "max_r", "max_g", "max_b"]
-    header = ["ply", "format binary_little_endian 1.0", "comment written by holoflow (PlayCanvas compressed)",
-              f"element chunk {n_chunks}", *(f"property float {k}" for k in names),
-              f"element vertex {n}", *(f"property uint packed_{k}" for k in ("position", "rotation", "scale", "color"))]
+    names = [
+        "min_x",
+        "min_y",
+        "min_z",
+        "max_x",
+        "max_y",
+        "max_z",
+        "min_scale_x",
+        "min_scale_y",
+        "min_scale_z",
+        "max_scale_x",
+        "max_scale_y",
+        "max_scale_z",
+        "min_r",
+        "min_g",
+        "min_b",
+        "max_r",
+        "max_g",
+        "max_b",
+    ]
+    header = [
+        "ply",
+        "format binary_little_endian 1.0",
+        "comment written by holoflow (PlayCanvas compressed)",
+        f"element chunk {n_chunks}",
+        *(f"property float {k}" for k in names),
+        f"element vertex {n}",
+        *(f"property uint packed_{k}" for k in ("position", "rotation", "scale", "color")),
+    ]
     k = s.sh_rest.shape[1]
     body = chunk.astype("<f4").tobytes() + packed.astype("<u4").tobytes()
     if k:
@@ -228,7 +265,7 @@ def _smallest_three_playcanvas(quats_wxyz: np.ndarray) -> np.ndarray:
     largest = np.argmax(np.abs(q), axis=1)
     q = q * np.where(q[np.arange(len(q)), largest] < 0, -1.0, 1.0)[:, None]
     # the three others in order: column k is q[:, k] before the largest, q[:, k + 1] from it on
-    rest = np.stack([np.where(largest > k, q[:, k], q[:, k + 1]) for k in range(3)], 1)     # [N, 3]
+    rest = np.stack([np.where(largest > k, q[:, k], q[:, k + 1]) for k in range(3)], 1)  # [N, 3]
     v = np.round(np.clip(rest * np.sqrt(0.5) + 0.5, 0, 1) * 1023).astype(np.uint32)
     return (largest.astype(np.uint32) << 30) | (v[:, 0] << 20) | (v[:, 1] << 10) | v[:, 2]
 

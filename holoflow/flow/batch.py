@@ -8,6 +8,7 @@ STAGE.PARAM=V1,V2,...`` axes (or a YAML list: ``--grid 'tangent_depth.grid=[[8, 
 each prompt. Every scene is one run over the same store; their steps share cache entries wherever the
 keys agree, so e.g. a sweep over a late stage's param computes the early stages once.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -50,19 +51,21 @@ def read_prompts(path: str | Path) -> list[SceneSpec]:
     except OSError as e:
         raise PipelineError(f"--prompts {path}: cannot read it ({e.strerror}); fix: check the path") from None
     if path.suffix.lower() not in (".yaml", ".yml"):
-        scenes = [SceneSpec(line.strip()) for line in text.splitlines()
-                  if line.strip() and not line.lstrip().startswith("#")]
+        scenes = [
+            SceneSpec(line.strip()) for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
+        ]
     else:
         import yaml
 
         try:
             doc = yaml.safe_load(text)
         except yaml.YAMLError as e:
-            raise PipelineError(f"--prompts {path}: not valid YAML ({str(e).splitlines()[0]}); fix: write a "
-                                f"list of prompts or of {{prompt: ..., set: {{...}}}}") from None
+            raise PipelineError(
+                f"--prompts {path}: not valid YAML ({str(e).splitlines()[0]}); fix: write a "
+                f"list of prompts or of {{prompt: ..., set: {{...}}}}"
+            ) from None
         if not isinstance(doc, list):
-            raise PipelineError(f"--prompts {path}: the top level must be a list; fix: start each scene "
-                                f"with '- '")
+            raise PipelineError(f"--prompts {path}: the top level must be a list; fix: start each scene with '- '")
         scenes = [_scene_item(path, i, item) for i, item in enumerate(doc, 1)]
     if not scenes:
         raise PipelineError(f"--prompts {path}: no prompts in it; fix: one prompt per line")
@@ -73,8 +76,10 @@ def _scene_item(path: Path, i: int, item: Any) -> SceneSpec:
     if isinstance(item, str):
         return SceneSpec(item)
     if not isinstance(item, dict) or set(item) - {"prompt", "set", "seed"}:
-        raise PipelineError(f"--prompts {path}: item {i} must be a prompt or a mapping with keys prompt, set, "
-                            f"seed; fix: e.g. '- {{prompt: a cabin, set: {{detail.strength: 0.7}}}}'")
+        raise PipelineError(
+            f"--prompts {path}: item {i} must be a prompt or a mapping with keys prompt, set, "
+            f"seed; fix: e.g. '- {{prompt: a cabin, set: {{detail.strength: 0.7}}}}'"
+        )
     prompt = item.get("prompt")
     if prompt is not None and not isinstance(prompt, str):
         raise PipelineError(f"--prompts {path}: item {i}: prompt is not text; fix: quote it")
@@ -87,16 +92,19 @@ def _scene_item(path: Path, i: int, item: Any) -> SceneSpec:
     elif isinstance(raw, list) and all(isinstance(s, str) for s in raw):
         sets = list(raw)
     else:
-        raise PipelineError(f"--prompts {path}: item {i}: set must be a mapping STAGE.PARAM: VALUE; fix: e.g. "
-                            f"set: {{detail.strength: 0.7}}")
+        raise PipelineError(
+            f"--prompts {path}: item {i}: set must be a mapping STAGE.PARAM: VALUE; fix: e.g. "
+            f"set: {{detail.strength: 0.7}}"
+        )
     return SceneSpec(prompt, sets, seed)
 
 
 def grid_axis(item: str) -> tuple[str, list[str]]:
     """``STAGE.PARAM=V1,V2`` or ``STAGE.PARAM=[V1, V2]`` -> (STAGE.PARAM, [set values as YAML text])."""
     if "=" not in item or "." not in item.split("=", 1)[0]:
-        raise PipelineError(f"--grid {item!r}: expected STAGE.PARAM=V1,V2,...; fix: e.g. "
-                            f"--grid detail.strength=0.3,0.5,0.7")
+        raise PipelineError(
+            f"--grid {item!r}: expected STAGE.PARAM=V1,V2,...; fix: e.g. --grid detail.strength=0.3,0.5,0.7"
+        )
     lhs, text = item.split("=", 1)
     if text.lstrip().startswith("["):
         import yaml
@@ -106,8 +114,9 @@ def grid_axis(item: str) -> tuple[str, list[str]]:
         except yaml.YAMLError:
             values = None
         if not isinstance(values, list) or not values:
-            raise PipelineError(f"--grid {item!r}: not a YAML list of values; fix: e.g. "
-                                f"--grid 'tangent_depth.grid=[[8, 7], [4, 4]]'")
+            raise PipelineError(
+                f"--grid {item!r}: not a YAML list of values; fix: e.g. --grid 'tangent_depth.grid=[[8, 7], [4, 4]]'"
+            )
         return lhs, [yaml_value(v) for v in values]
     values = [v.strip() for v in text.split(",")]
     if not all(values):
@@ -120,8 +129,9 @@ def sweep(prompts: list[SceneSpec], grid: list[str]) -> list[SceneSpec]:
     axes = [grid_axis(g) for g in grid]
     names = [a for a, _ in axes]
     if len(set(names)) != len(names):
-        raise PipelineError(f"--grid names {', '.join(n for n in names if names.count(n) > 1)} twice; fix: "
-                            f"give each param one --grid")
+        raise PipelineError(
+            f"--grid names {', '.join(n for n in names if names.count(n) > 1)} twice; fix: give each param one --grid"
+        )
     out = []
     for p in prompts:
         for point in itertools.product(*(vals for _, vals in axes)):
@@ -136,8 +146,12 @@ def make_scenes(pipe: Pipeline, store: Store, base: Options, specs: list[SceneSp
     scenes = []
     hasher = None
     for i, spec in enumerate(specs, 1):
-        opts = replace(base, prompt=spec.prompt if spec.prompt is not None else base.prompt,
-                       sets=list(base.sets) + spec.sets, seed=spec.seed if spec.seed is not None else base.seed)
+        opts = replace(
+            base,
+            prompt=spec.prompt if spec.prompt is not None else base.prompt,
+            sets=list(base.sets) + spec.sets,
+            seed=spec.seed if spec.seed is not None else base.seed,
+        )
         try:
             ctx = Context.build(pipe, store, opts, hasher=hasher)
         except PipelineError as e:

@@ -14,6 +14,7 @@ key = sha256(canonical JSON of {stage, code, engine, params, inputs, seed[, prom
 - Non-finite floats (``--set point_cloud.grad_threshold=.inf``) hash as ``{"float": "inf"}``,
   ``{"float": "-inf"}`` or ``{"float": "nan"}``; finite values hash as plain JSON numbers.
 """
+
 from __future__ import annotations
 
 import ast
@@ -31,7 +32,7 @@ _SKIP_DIRS = {"__pycache__", ".git", ".pytest_cache", ".mypy_cache", ".ipynb_che
 _SKIP_SUFFIXES = {".pyc", ".pyo", ".swp", ".tmp"}
 
 
-FORMAT_KEY, CACHE_FORMAT = "#format", 2      # code.json layout; 2: imports include entry-point strings
+FORMAT_KEY, CACHE_FORMAT = "#format", 2  # code.json layout; 2: imports include entry-point strings
 
 
 class CodeHasher:
@@ -46,15 +47,15 @@ class CodeHasher:
         self.cache_file = cache_file
         self._cache: dict[str, list] = {}
         self._dirty = False
-        self._walked: dict[str, list[tuple[str, str]]] = {}      # path -> [(absolute, relative)]
+        self._walked: dict[str, list[tuple[str, str]]] = {}  # path -> [(absolute, relative)]
         self._seen: dict[str, list] = {}
-        self._graphs: dict[str, ImportGraph] = {}                # program folder -> its import graph
+        self._graphs: dict[str, ImportGraph] = {}  # program folder -> its import graph
         if cache_file is not None:
             try:
                 self._cache = json.loads(cache_file.read_text())
             except (OSError, ValueError):
                 self._cache = {}
-            if self._cache.get(FORMAT_KEY) != CACHE_FORMAT:      # entries of an older parser: drop them
+            if self._cache.get(FORMAT_KEY) != CACHE_FORMAT:  # entries of an older parser: drop them
                 self._cache = {FORMAT_KEY: CACHE_FORMAT}
 
     def version(self, paths: list[Path]) -> dict[str, str]:
@@ -128,7 +129,7 @@ class CodeHasher:
     def _relative(self, path: str, root: str | None) -> str:
         """``path`` relative to the pipeline's folder, else to its search root, else absolute."""
         if path.startswith(self.root):
-            return path[len(self.root):]
+            return path[len(self.root) :]
         if root is not None:
             return os.path.relpath(path, root)
         return path
@@ -140,7 +141,7 @@ class CodeHasher:
             try:
                 write_atomic(self.cache_file, json.dumps(self._cache))
             except OSError:
-                pass        # a cache only; a read-only store still works
+                pass  # a cache only; a read-only store still works
             self._dirty = False
 
 
@@ -151,8 +152,11 @@ def _walk(p: str) -> list[str]:
     out = []
     for dirpath, dirnames, filenames in os.walk(p):
         dirnames[:] = sorted(d for d in dirnames if d not in _SKIP_DIRS and not d.startswith("."))
-        out.extend(os.path.join(dirpath, f) for f in sorted(filenames)
-                   if not f.startswith(".") and os.path.splitext(f)[1] not in _SKIP_SUFFIXES)
+        out.extend(
+            os.path.join(dirpath, f)
+            for f in sorted(filenames)
+            if not f.startswith(".") and os.path.splitext(f)[1] not in _SKIP_SUFFIXES
+        )
     return out
 
 
@@ -179,10 +183,16 @@ def tree_digest(outputs: dict[str, dict]) -> str:
     return sha256_bytes(canonical_json({k: v["digest"] for k, v in outputs.items()}).encode())
 
 
-def components(stage: str, code: dict[str, str], engine: str, params: dict[str, Any],
-               inputs: dict[str, dict[str, str]], seed: int, prompt: str | None) -> dict[str, Any]:
-    comp = {"stage": stage, "code": code, "engine": engine, "params": params, "inputs": inputs,
-            "seed": seed}
+def components(
+    stage: str,
+    code: dict[str, str],
+    engine: str,
+    params: dict[str, Any],
+    inputs: dict[str, dict[str, str]],
+    seed: int,
+    prompt: str | None,
+) -> dict[str, Any]:
+    comp = {"stage": stage, "code": code, "engine": engine, "params": params, "inputs": inputs, "seed": seed}
     if prompt is not None:
         comp["prompt"] = prompt
     return comp
@@ -211,8 +221,9 @@ def reasons(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
     op, np_ = old.get("params", {}), new.get("params", {})
     for k in sorted(set(op) | set(np_)):
         if finite_json(op.get(k, "<unset>")) != finite_json(np_.get(k, "<unset>")):
-            out.append(f"params changed: {new['stage']}.{k} {_short(op.get(k, '<unset>'))} -> "
-                       f"{_short(np_.get(k, '<unset>'))}")
+            out.append(
+                f"params changed: {new['stage']}.{k} {_short(op.get(k, '<unset>'))} -> {_short(np_.get(k, '<unset>'))}"
+            )
     oc, nc = old.get("code", {}), new.get("code", {})
     changed = sorted(f for f in set(oc) | set(nc) if oc.get(f) != nc.get(f))
     if changed:

@@ -13,6 +13,7 @@ names built at run time (``importlib.import_module(name)``) are not, except one 
 of holoflow/flow/params.py hold) counts as ``import package.module``. Anything else loaded by name goes in
 the stage's ``code:``.
 """
+
 from __future__ import annotations
 
 import ast
@@ -23,8 +24,8 @@ from typing import Callable
 
 HOLOFLOW_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # holds holoflow/
 
-ImportRecord = tuple[int, str, list[str]]           # (level, module, imported names); [] for `import m`
-ENTRY_POINT = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+):[A-Za-z_]\w*$")   # "pkg.mod:attr"
+ImportRecord = tuple[int, str, list[str]]  # (level, module, imported names); [] for `import m`
+ENTRY_POINT = re.compile(r"^([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+):[A-Za-z_]\w*$")  # "pkg.mod:attr"
 
 
 def parse_imports(tree: ast.Module) -> tuple[list[ImportRecord], bool]:
@@ -41,11 +42,10 @@ def parse_imports(tree: ast.Module) -> tuple[list[ImportRecord], bool]:
         elif isinstance(node, ast.Constant) and isinstance(node.value, str) and (m := ENTRY_POINT.match(node.value)):
             records.append((0, m.group(1), []))
         elif isinstance(node, ast.If) and _is_type_checking(node.test):
-            stack.extend(reversed(node.orelse))         # the body never runs
+            stack.extend(reversed(node.orelse))  # the body never runs
             continue
         stack.extend(reversed(list(ast.iter_child_nodes(node))))
-    lazy = any(isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.name == "__getattr__"
-               for n in tree.body)
+    lazy = any(isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.name == "__getattr__" for n in tree.body)
     return records, lazy
 
 
@@ -55,7 +55,7 @@ class Found:
 
     file: str
     root: str
-    package_dir: str | None         # the folder of a package; None for a plain module
+    package_dir: str | None  # the folder of a package; None for a plain module
 
 
 class ImportGraph:
@@ -65,8 +65,9 @@ class ImportGraph:
     the file's ``parse_imports`` result (the caller caches it across processes).
     """
 
-    def __init__(self, roots: list[tuple[str, frozenset[str] | None]],
-                 parsed: Callable[[str], tuple[list[ImportRecord], bool]]):
+    def __init__(
+        self, roots: list[tuple[str, frozenset[str] | None]], parsed: Callable[[str], tuple[list[ImportRecord], bool]]
+    ):
         self.roots = roots
         self.parsed = parsed
         self._listing: dict[str, frozenset[str]] = {}
@@ -86,7 +87,7 @@ class ImportGraph:
             seen.add(module)
             parent = module.rpartition(".")[0]
             if parent:
-                stack.append(parent)                # importing a.b runs a/__init__.py first
+                stack.append(parent)  # importing a.b runs a/__init__.py first
             found = self.find(module)
             if found is None:
                 continue
@@ -118,7 +119,7 @@ class ImportGraph:
                 if here is not None and here.file:
                     hit = here
                     break
-                hit = hit or here                   # a namespace folder yields to a later real module
+                hit = hit or here  # a namespace folder yields to a later real module
         else:
             up = self.find(parent)
             hit = self._find_in(up.package_dir, up.root, leaf) if up and up.package_dir else None
@@ -159,7 +160,8 @@ class ImportGraph:
 
 def _is_type_checking(test: ast.expr) -> bool:
     return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
 
 
 def _targets(records: list[ImportRecord], package: str) -> list[str]:
@@ -169,8 +171,8 @@ def _targets(records: list[ImportRecord], package: str) -> list[str]:
         if level:
             base = package.split(".") if package else []
             if not package or level - 1 >= len(base):
-                continue                            # beyond the top level: Python raises; nothing runs
-            module = ".".join(base[:len(base) - level + 1] + ([module] if module else []))
+                continue  # beyond the top level: Python raises; nothing runs
+            module = ".".join(base[: len(base) - level + 1] + ([module] if module else []))
         if not module:
             continue
         out.append(module)

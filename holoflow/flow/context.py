@@ -1,6 +1,7 @@
 """The run context: a run's options (``holoflow run``'s flags), and everything a run or a status check
 needs resolved once from them (params, device, prompt, seed, ``--use`` files, the code hasher).
 Imports nothing heavy and no domain package."""
+
 from __future__ import annotations
 
 import os
@@ -28,12 +29,12 @@ class Options:
     device: str | None = None
     lock_timeout: float | None = None
     verbose: bool = False
-    jobs: int = 1                   # -j: CPU slots of the local executor (local Ray: its CPUs)
-    executor: str = "local"         # local | ray
-    address: str | None = None      # Ray cluster address (ray executor)
-    connect_timeout: float | None = None    # seconds to wait for the cluster at address (None: 60)
-    retries: int | None = None      # extra attempts per failed step (None: the executor's default)
-    cold: bool = False              # --cold: exec every local step (no warm template)
+    jobs: int = 1  # -j: CPU slots of the local executor (local Ray: its CPUs)
+    executor: str = "local"  # local | ray
+    address: str | None = None  # Ray cluster address (ray executor)
+    connect_timeout: float | None = None  # seconds to wait for the cluster at address (None: 60)
+    retries: int | None = None  # extra attempts per failed step (None: the executor's default)
+    cold: bool = False  # --cold: exec every local step (no warm template)
 
 
 @dataclass
@@ -64,21 +65,35 @@ class Context:
             prompt = info.get("prompt") if info else None
         seed = pipe.seed if opts.seed is None else opts.seed
         hasher = hasher or CodeHasher(pipe.root, store.root / "cache" / "code.json")
-        return cls(pipe, store, resolved, seed, prompt, opts.profile or pipe.default_profile, uses,
-                   hasher, device, opts.verbose)
+        return cls(
+            pipe,
+            store,
+            resolved,
+            seed,
+            prompt,
+            opts.profile or pipe.default_profile,
+            uses,
+            hasher,
+            device,
+            opts.verbose,
+        )
 
     def components(self, name: str, outputs: dict[str, dict]) -> dict[str, Any]:
         """Key components of stage ``name`` given its upstream stages' outputs."""
         s = self.pipe.stages[name]
         r = self.resolved[name]
-        code = {**self.hasher.closure(self.pipe.program(name)),
-                **self.hasher.version([self.pipe.path_of(c) for c in s.code])}
+        code = {
+            **self.hasher.closure(self.pipe.program(name)),
+            **self.hasher.version([self.pipe.path_of(c) for c in s.code]),
+        }
         inputs = {inp: {"stage": up, "tree": tree_digest(outputs[up])} for inp, up in s.inputs.items()}
         prompt = None
         if s.prompt:
             if self.prompt is None:
-                raise PipelineError(f"stage '{name}' needs a prompt and no earlier run gave one; fix: "
-                                    f"holoflow run \"a small wooden cabin\"")
+                raise PipelineError(
+                    f"stage '{name}' needs a prompt and no earlier run gave one; fix: "
+                    f'holoflow run "a small wooden cabin"'
+                )
             prompt = self.prompt
         return components(name, code, r.engine, r.params, inputs, self.seed, prompt)
 
@@ -89,8 +104,8 @@ class BatchItem:
 
     ctx: Context
     opts: Options
-    label: str = ""                 # "" for a single run; "s1", "s2", ... in a batch
-    sets: list[str] = field(default_factory=list)       # the scene's own --set (for the summary)
+    label: str = ""  # "" for a single run; "s1", "s2", ... in a batch
+    sets: list[str] = field(default_factory=list)  # the scene's own --set (for the summary)
 
 
 def parse_uses(pipe: Pipeline, uses: list[str]) -> dict[str, Path]:
@@ -100,8 +115,7 @@ def parse_uses(pipe: Pipeline, uses: list[str]) -> dict[str, Path]:
             raise PipelineError(f"--use {item!r}: expected STAGE=PATH; fix: e.g. --use base_pano=my_pano.exr")
         stage, path = item.split("=", 1)
         if stage not in pipe.stages:
-            raise PipelineError(f"--use {item!r}: unknown stage '{stage}'; fix: use one of: "
-                                f"{', '.join(pipe.stages)}")
+            raise PipelineError(f"--use {item!r}: unknown stage '{stage}'; fix: use one of: {', '.join(pipe.stages)}")
         p = Path(path).expanduser().absolute()
         if not p.exists():
             raise PipelineError(f"--use {stage}={path}: no such file or folder; fix: check the path")
@@ -120,8 +134,10 @@ def run_device(pipe: Pipeline, opts: Options) -> str:
     if asked == "auto":
         return "cuda" if cuda_present() else "cpu"
     if asked == "cuda" and not explicit and not cuda_present():
-        raise PipelineError(f"profile '{opts.profile}' asks for device cuda and this machine has no CUDA "
-                            f"device; fix: run it on a GPU machine, or add --device cpu (slow at full size)")
+        raise PipelineError(
+            f"profile '{opts.profile}' asks for device cuda and this machine has no CUDA "
+            f"device; fix: run it on a GPU machine, or add --device cpu (slow at full size)"
+        )
     return asked
 
 
@@ -144,8 +160,12 @@ def cuda_present() -> bool:
 
 def select(pipe: Pipeline, opts: Options, uses: dict[str, Path]) -> tuple[set[str], set[str], set[str]]:
     """(selected: may run, needed: must be available, forced) from --from/--until/--only/--force/--use."""
-    for flag, name in (("--from", opts.from_stage), ("--until", opts.until), ("--only", opts.only),
-                       *(("--force", f) for f in opts.force if f != "all")):
+    for flag, name in (
+        ("--from", opts.from_stage),
+        ("--until", opts.until),
+        ("--only", opts.only),
+        *(("--force", f) for f in opts.force if f != "all"),
+    ):
         if name is not None and name not in pipe.stages:
             raise PipelineError(f"{flag} {name}: unknown stage; fix: use one of: {', '.join(pipe.stages)}")
     selected = set(pipe.stages)
@@ -157,9 +177,11 @@ def select(pipe: Pipeline, opts: Options, uses: dict[str, Path]) -> tuple[set[st
         selected = {opts.only}
     forced = set(selected) if "all" in opts.force else set(opts.force)
     if forced - selected:
-        raise PipelineError(f"--force {', '.join(sorted(forced - selected))}: not among the stages this run "
-                            f"covers ({', '.join(s for s in pipe.stages if s in selected)}); fix: widen "
-                            f"--from/--until/--only")
+        raise PipelineError(
+            f"--force {', '.join(sorted(forced - selected))}: not among the stages this run "
+            f"covers ({', '.join(s for s in pipe.stages if s in selected)}); fix: widen "
+            f"--from/--until/--only"
+        )
     needed: set[str] = set()
     stack = list(selected)
     while stack:

@@ -13,6 +13,7 @@ to ``ENGINES``.
 Only the standard library is imported here, and config modules import only this module: the CLI,
 the pipeline's validation and ``holoflow params`` never load torch.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -31,8 +32,17 @@ class ParamError(ValueError):
         self.msg, self.fix = msg, fix
 
 
-def param(default: Any, doc: str, units: str = "", *, ge: float | None = None, gt: float | None = None,
-          le: float | None = None, lt: float | None = None, choices: tuple[str, ...] = ()) -> Any:
+def param(
+    default: Any,
+    doc: str,
+    units: str = "",
+    *,
+    ge: float | None = None,
+    gt: float | None = None,
+    le: float | None = None,
+    lt: float | None = None,
+    choices: tuple[str, ...] = (),
+) -> Any:
     """A stage parameter field: ``default``; ``doc`` (one line); ``units`` ("px", "m", "" for none);
     the valid range ``ge``/``gt``/``le``/``lt`` (numbers, each element of a tuple) or ``choices``."""
     meta = {"doc": doc, "units": units, "ge": ge, "gt": gt, "le": le, "lt": lt, "choices": tuple(choices)}
@@ -44,10 +54,10 @@ class FieldInfo:
     """One parameter as ``holoflow params`` and docs/stages.md show it."""
 
     name: str
-    type: str           # "int", "float", "bool", "str", "tuple[int, int]"
+    type: str  # "int", "float", "bool", "str", "tuple[int, int]"
     default: Any
     units: str
-    range: str          # "> 0", "[0, 1]", "grid | affine | median", "" (any)
+    range: str  # "> 0", "[0, 1]", "grid | affine | median", "" (any)
     doc: str
 
 
@@ -64,9 +74,15 @@ class Engines:
     role), ...)}) are the models an engine loads, in load order: the stage param that names each and
     its role (a key of holoflow.networks.weights.DEFAULTS; ``holoflow models``, ``run --models``)."""
 
-    def __init__(self, signature: str, choosers: dict[str, str] | None = None, *,
-                 on_device: dict[str, dict[str, str]] | None = None,
-                 weights: dict[str, tuple[tuple[str, str], ...]] | None = None, **targets: str):
+    def __init__(
+        self,
+        signature: str,
+        choosers: dict[str, str] | None = None,
+        *,
+        on_device: dict[str, dict[str, str]] | None = None,
+        weights: dict[str, tuple[tuple[str, str], ...]] | None = None,
+        **targets: str,
+    ):
         self.signature = signature
         self.choosers = dict(choosers or {})
         self.on_device = {k: dict(v) for k, v in (on_device or {}).items()}
@@ -84,11 +100,14 @@ class Engines:
     def get(self, name: str) -> Callable[..., Any]:
         """The engine callable ``name``; ValueError (one line, with the known names) if unknown."""
         if name in self.choosers:
-            raise ValueError(f"engine {name!r} is chosen when the step runs ({self.choosers[name]}); "
-                             f"resolve it to one of {', '.join(self.targets)} first")
+            raise ValueError(
+                f"engine {name!r} is chosen when the step runs ({self.choosers[name]}); "
+                f"resolve it to one of {', '.join(self.targets)} first"
+            )
         if name not in self.targets:
-            raise ValueError(f"unknown engine {name!r}; registered: {', '.join(self.targets)}"
-                             f"{suggest(name, self.targets)}")
+            raise ValueError(
+                f"unknown engine {name!r}; registered: {', '.join(self.targets)}{suggest(name, self.targets)}"
+            )
         module, attr = self.targets[name].split(":")
         return getattr(importlib.import_module(module), attr)
 
@@ -108,8 +127,17 @@ class StageParams:
     @classmethod
     def fields_info(cls) -> list[FieldInfo]:
         hints = _hints(cls)
-        return [FieldInfo(f.name, _type_name(hints[f.name]), f.default, f.metadata["units"],
-                          _range_text(f.metadata), f.metadata["doc"]) for f in dataclasses.fields(cls)]
+        return [
+            FieldInfo(
+                f.name,
+                _type_name(hints[f.name]),
+                f.default,
+                f.metadata["units"],
+                _range_text(f.metadata),
+                f.metadata["doc"],
+            )
+            for f in dataclasses.fields(cls)
+        ]
 
     @classmethod
     def defaults(cls) -> dict[str, Any]:
@@ -122,22 +150,26 @@ class StageParams:
         a list for a tuple field -> tuple); ParamError for an unknown name, a wrong type or range."""
         fields = {f.name: f for f in dataclasses.fields(cls)}
         if name not in fields:
-            raise ParamError(f"unknown param '{name}'",
-                             f"params are: {', '.join(fields)}{suggest(name, fields)}")
+            raise ParamError(f"unknown param '{name}'", f"params are: {', '.join(fields)}{suggest(name, fields)}")
         f = fields[name]
         hint = _hints(cls)[name]
         ok, out = _coerce(hint, value)
         if not ok:
-            raise ParamError(f"{name}={value!r} is {kind(value)}, expected {_type_name(hint)}",
-                             f"give {name} {article(hint)} value")
+            raise ParamError(
+                f"{name}={value!r} is {kind(value)}, expected {_type_name(hint)}", f"give {name} {article(hint)} value"
+            )
         meta = f.metadata
         if meta["choices"] and out not in meta["choices"]:
-            raise ParamError(f"{name}={value!r} is not one of {', '.join(meta['choices'])}",
-                             f"use one of: {', '.join(meta['choices'])}{suggest(str(value), meta['choices'])}")
+            raise ParamError(
+                f"{name}={value!r} is not one of {', '.join(meta['choices'])}",
+                f"use one of: {', '.join(meta['choices'])}{suggest(str(value), meta['choices'])}",
+            )
         for v in out if isinstance(out, tuple) else (out,):
             if isinstance(v, (int, float)) and not isinstance(v, bool) and not _in_range(v, meta):
-                raise ParamError(f"{name}={value!r} is outside the valid range {_range_text(meta)}",
-                                 f"give {name} a value {_range_text(meta)}")
+                raise ParamError(
+                    f"{name}={value!r} is outside the valid range {_range_text(meta)}",
+                    f"give {name} a value {_range_text(meta)}",
+                )
         return out
 
     @classmethod
@@ -146,7 +178,7 @@ class StageParams:
         names = {f.name for f in dataclasses.fields(cls)}
         for k in params:
             if k not in names:
-                cls.check(k, None)          # raises: unknown param, with the names and a did-you-mean
+                cls.check(k, None)  # raises: unknown param, with the names and a did-you-mean
         return cls(**params)
 
     def as_params(self) -> dict[str, Any]:
@@ -223,8 +255,12 @@ def _coerce(hint: Any, value: Any) -> tuple[bool, Any]:
 def _in_range(v: float, meta: dict) -> bool:
     if isinstance(v, float) and math.isnan(v):
         return False
-    return ((meta["ge"] is None or v >= meta["ge"]) and (meta["gt"] is None or v > meta["gt"])
-            and (meta["le"] is None or v <= meta["le"]) and (meta["lt"] is None or v < meta["lt"]))
+    return (
+        (meta["ge"] is None or v >= meta["ge"])
+        and (meta["gt"] is None or v > meta["gt"])
+        and (meta["le"] is None or v <= meta["le"])
+        and (meta["lt"] is None or v < meta["lt"])
+    )
 
 
 def _range_text(meta: dict) -> str:
@@ -243,14 +279,28 @@ def _type_name(hint: Any) -> str:
 
 def article(hint: Any) -> str:
     """What a value of type ``hint`` is called after "give NAME ...": "an integer", "a true/false"."""
-    return {bool: "a true/false", int: "an integer", float: "a numeric", str: "a string", list: "a list",
-            dict: "a mapping"}.get(hint, f"a {_type_name(hint)}")
+    return {
+        bool: "a true/false",
+        int: "an integer",
+        float: "a numeric",
+        str: "a string",
+        list: "a list",
+        dict: "a mapping",
+    }.get(hint, f"a {_type_name(hint)}")
 
 
 def kind(v: Any) -> str:
     """What ``v`` is, in words ("an integer", "a mapping", "empty"), for error messages."""
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list",
-            tuple: "a list", dict: "a mapping", type(None): "empty"}.get(type(v), type(v).__name__)
+    return {
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+        str: "a string",
+        list: "a list",
+        tuple: "a list",
+        dict: "a mapping",
+        type(None): "empty",
+    }.get(type(v), type(v).__name__)
 
 
 def _plain(v: Any) -> Any:

@@ -29,6 +29,7 @@ $HOLOFLOW_DEVICE win over it. ``--profile a,b`` applies a, then b, in order: for
 engine / params / resources replace a's key by key (a key b does not name keeps a's value), and the
 last profile naming a device wins.
 """
+
 from __future__ import annotations
 
 import re
@@ -40,8 +41,7 @@ from .params import ParamError, article, coerce_like, is_int, kind, load_class, 
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _TOP_KEYS = {"version", "seed", "default_profile", "stages", "profiles"}
-_STAGE_KEYS = {"run", "engine", "engines", "prompt", "inputs", "code", "primary", "config", "params",
-               "resources"}
+_STAGE_KEYS = {"run", "engine", "engines", "prompt", "inputs", "code", "primary", "config", "params", "resources"}
 _RESOURCE_KEYS = {"cpus": int, "gpus": int, "memory_gb": float}
 DEVICES = ("cpu", "cuda", "auto")
 SUPPORTED_VERSIONS = (1,)
@@ -75,27 +75,27 @@ class Stage:
     """One stage as declared in pipeline.yaml (before a profile is applied)."""
 
     name: str
-    run: str                       # program path relative to the pipeline's folder
+    run: str  # program path relative to the pipeline's folder
     engine: str
     engines: tuple[str, ...]
     prompt: bool
-    inputs: dict[str, str]         # input name -> upstream stage
-    code: tuple[str, ...]          # paths relative to the pipeline's folder
-    params: dict[str, Any]         # every param's default (the class's, with `params:` applied)
+    inputs: dict[str, str]  # input name -> upstream stage
+    code: tuple[str, ...]  # paths relative to the pipeline's folder
+    params: dict[str, Any]  # every param's default (the class's, with `params:` applied)
     primary: str | None = None
     resources: Resources = Resources()
-    config: Any = None             # the StageParams class named by `config:` (holoflow/flow/params.py), or None
+    config: Any = None  # the StageParams class named by `config:` (holoflow/flow/params.py), or None
 
 
 @dataclass
 class Pipeline:
-    path: Path                     # pipeline.yaml, absolute
+    path: Path  # pipeline.yaml, absolute
     version: int
     seed: int
     default_profile: str | None
-    stages: dict[str, Stage]       # in topological order
+    stages: dict[str, Stage]  # in topological order
     profiles: dict[str, dict[str, dict[str, Any]]]
-    profile_devices: dict[str, str] = field(default_factory=dict)    # profile -> cpu | cuda | auto
+    profile_devices: dict[str, str] = field(default_factory=dict)  # profile -> cpu | cuda | auto
 
     @property
     def root(self) -> Path:
@@ -113,7 +113,7 @@ class Pipeline:
     def downstream(self, names: set[str]) -> set[str]:
         """``names`` and every stage that depends on one of them, transitively."""
         out = set(names)
-        for s in self.stages.values():        # topological order: one pass suffices
+        for s in self.stages.values():  # topological order: one pass suffices
             if any(up in out for up in s.inputs.values()):
                 out.add(s.name)
         return out
@@ -134,7 +134,7 @@ class Resolved:
     stage: Stage
     engine: str
     params: dict[str, Any]
-    overrides: dict[str, str] = field(default_factory=dict)   # param -> where it was set
+    overrides: dict[str, str] = field(default_factory=dict)  # param -> where it was set
     resources: Resources = Resources()
 
 
@@ -161,8 +161,7 @@ def load(path: str | Path, cache_dir: Path | None = None) -> Pipeline:
     """
     path = Path(path).absolute()
     if not path.is_file():
-        raise PipelineError(f"{path}: no such pipeline file; fix: run from the project folder or pass "
-                            f"--pipeline FILE")
+        raise PipelineError(f"{path}: no such pipeline file; fix: run from the project folder or pass --pipeline FILE")
     doc = _parse_cached(path, cache_dir)
     return _validate(path, doc)
 
@@ -187,7 +186,7 @@ def _parse_cached(path: Path, cache_dir: Path | None) -> Any:
         try:
             write_atomic(cache, json.dumps({"stamp": stamp, "doc": doc}))
         except (OSError, TypeError, ValueError):
-            pass            # a cache only (a YAML document JSON cannot hold is simply not cached)
+            pass  # a cache only (a YAML document JSON cannot hold is simply not cached)
     return doc
 
 
@@ -200,20 +199,27 @@ def _parse(path: Path) -> Any:
         mark = getattr(e, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(e, "problem", None) or str(e).splitlines()[0]
-        raise PipelineError(f"{path.name}: not valid YAML{where}: {problem}; fix: correct the syntax "
-                            f"there (indentation, quotes, colons)") from None
+        raise PipelineError(
+            f"{path.name}: not valid YAML{where}: {problem}; fix: correct the syntax "
+            f"there (indentation, quotes, colons)"
+        ) from None
     except UnicodeDecodeError:
         raise PipelineError(f"{path.name}: not a UTF-8 text file; fix: save it as UTF-8") from None
 
 
 def _validate(path: Path, doc: Any) -> Pipeline:
     if not isinstance(doc, dict):
-        raise _err(path, None, f"top level is {kind(doc)}, not a mapping",
-                   "start with `version: 1` and a `stages:` mapping")
+        raise _err(
+            path, None, f"top level is {kind(doc)}, not a mapping", "start with `version: 1` and a `stages:` mapping"
+        )
     for key in doc:
         if key not in _TOP_KEYS:
-            raise _err(path, None, f"unknown top-level key '{key}'",
-                       f"use only {', '.join(sorted(_TOP_KEYS))}{suggest(key, _TOP_KEYS)}")
+            raise _err(
+                path,
+                None,
+                f"unknown top-level key '{key}'",
+                f"use only {', '.join(sorted(_TOP_KEYS))}{suggest(key, _TOP_KEYS)}",
+            )
     version = doc.get("version")
     if version not in SUPPORTED_VERSIONS:
         raise _err(path, None, f"version is {version!r}", "set `version: 1`")
@@ -229,17 +235,29 @@ def _validate(path: Path, doc: Any) -> Pipeline:
     for s in stages.values():
         for inp, up in s.inputs.items():
             if up not in stages:
-                raise _err(path, s.name, f"input '{inp}' names unknown stage '{up}'",
-                           f"name one of: {', '.join(stages)}{suggest(up, stages)}")
+                raise _err(
+                    path,
+                    s.name,
+                    f"input '{inp}' names unknown stage '{up}'",
+                    f"name one of: {', '.join(stages)}{suggest(up, stages)}",
+                )
             if up == s.name:
-                raise _err(path, s.name, f"input '{inp}' names the stage itself",
-                           "a stage cannot read its own outputs; name an upstream stage")
+                raise _err(
+                    path,
+                    s.name,
+                    f"input '{inp}' names the stage itself",
+                    "a stage cannot read its own outputs; name an upstream stage",
+                )
     ordered = _toposort(path, stages)
     profiles, devices = _profiles(path, doc.get("profiles"), stages)
     default_profile = doc.get("default_profile")
     if default_profile is not None and default_profile not in profiles:
-        raise _err(path, None, f"default_profile '{default_profile}' is not a profile",
-                   f"define it under `profiles:` or use one of: {', '.join(profiles) or '(none)'}")
+        raise _err(
+            path,
+            None,
+            f"default_profile '{default_profile}' is not a profile",
+            f"define it under `profiles:` or use one of: {', '.join(profiles) or '(none)'}",
+        )
     return Pipeline(path, version, int(seed), default_profile, ordered, profiles, devices)
 
 
@@ -247,12 +265,15 @@ def _stage(path: Path, name: Any, block: Any) -> Stage:
     if not isinstance(name, str) or not _NAME.match(name):
         raise _err(path, str(name), "invalid stage name", "use letters, digits and _ (not first digit)")
     if not isinstance(block, dict):
-        raise _err(path, name, f"block is {kind(block)}, not a mapping",
-                   "give it `run:`, `engine:` and `params:` keys")
+        raise _err(path, name, f"block is {kind(block)}, not a mapping", "give it `run:`, `engine:` and `params:` keys")
     for key in block:
         if key not in _STAGE_KEYS:
-            raise _err(path, name, f"unknown key '{key}'",
-                       f"use only {', '.join(sorted(_STAGE_KEYS))}{suggest(key, _STAGE_KEYS)}")
+            raise _err(
+                path,
+                name,
+                f"unknown key '{key}'",
+                f"use only {', '.join(sorted(_STAGE_KEYS))}{suggest(key, _STAGE_KEYS)}",
+            )
     run = block.get("run")
     if not isinstance(run, str) or not run.strip():
         raise _err(path, name, "missing `run:`", "set `run:` to the stage program, e.g. stages/NAME.py")
@@ -263,16 +284,17 @@ def _stage(path: Path, name: Any, block: Any) -> Stage:
     if not isinstance(engines, list) or not engines or not all(isinstance(e, str) and e for e in engines):
         raise _err(path, name, "`engines:` is not a list of names", "write e.g. `engines: [classical, model]`")
     if engine not in engines:
-        raise _err(path, name, f"engine '{engine}' is not in engines {engines}",
-                   "add it to `engines:` or pick a listed one")
+        raise _err(
+            path, name, f"engine '{engine}' is not in engines {engines}", "add it to `engines:` or pick a listed one"
+        )
     prompt = block.get("prompt", False)
     if not isinstance(prompt, bool):
         raise _err(path, name, f"`prompt:` is {prompt!r}", "write `prompt: true` or `prompt: false`")
     inputs = block.get("inputs", {}) or {}
-    if not isinstance(inputs, dict) or not all(isinstance(k, str) and isinstance(v, str)
-                                                for k, v in inputs.items()):
-        raise _err(path, name, "`inputs:` is not a mapping of input name -> stage",
-                   "write e.g. `inputs: {pano: upscale}`")
+    if not isinstance(inputs, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in inputs.items()):
+        raise _err(
+            path, name, "`inputs:` is not a mapping of input name -> stage", "write e.g. `inputs: {pano: upscale}`"
+        )
     for inp in inputs:
         if not _NAME.match(inp):
             raise _err(path, name, f"invalid input name '{inp}'", "use letters, digits and _")
@@ -286,22 +308,28 @@ def _stage(path: Path, name: Any, block: Any) -> Stage:
         raise _err(path, name, f"`params:` is {kind(params)}, not a mapping", "write `params: {key: value}`")
     for p in params:
         if not isinstance(p, str) or not _NAME.match(p) or p == "engine":
-            raise _err(path, name, f"invalid param name {p!r}",
-                       "use letters, digits and _; `engine` is reserved")
+            raise _err(path, name, f"invalid param name {p!r}", "use letters, digits and _; `engine` is reserved")
     config = _config_class(path, name, block.get("config"))
     if config is not None:
         for e in engines:
             if e not in config.ENGINES.names:
-                raise _err(path, name, f"engine '{e}' is not registered for {config.__name__}",
-                           f"use one of: {', '.join(config.ENGINES.names)}{suggest(e, config.ENGINES.names)}")
-        params = {**config.defaults(), **{k: _param_checked(path, name, config, k, v, "`params:`")
-                                          for k, v in params.items()}}
+                raise _err(
+                    path,
+                    name,
+                    f"engine '{e}' is not registered for {config.__name__}",
+                    f"use one of: {', '.join(config.ENGINES.names)}{suggest(e, config.ENGINES.names)}",
+                )
+        params = {
+            **config.defaults(),
+            **{k: _param_checked(path, name, config, k, v, "`params:`") for k, v in params.items()},
+        }
     primary = block.get("primary")
     if primary is not None and (not isinstance(primary, str) or not primary or "/" in primary):
         raise _err(path, name, f"`primary:` is {primary!r}", "name one output file, e.g. `primary: pano.exr`")
     resources = _resources(path, name, block.get("resources"), Resources(), "`resources:`")
-    return Stage(name, run, engine, tuple(engines), prompt, dict(inputs), tuple(code), dict(params), primary,
-                 resources, config)
+    return Stage(
+        name, run, engine, tuple(engines), prompt, dict(inputs), tuple(code), dict(params), primary, resources, config
+    )
 
 
 def _config_class(path: Path, stage: str, spec: Any):
@@ -313,8 +341,12 @@ def _config_class(path: Path, stage: str, spec: Any):
     try:
         return load_class(spec)
     except (ImportError, AttributeError) as e:
-        raise _err(path, stage, f"`config: {spec}` cannot be loaded ({e})",
-                   "name a StageParams class, e.g. holoflow.recon.config:PreOptParams") from None
+        raise _err(
+            path,
+            stage,
+            f"`config: {spec}` cannot be loaded ({e})",
+            "name a StageParams class, e.g. holoflow.recon.config:PreOptParams",
+        ) from None
 
 
 def _param_checked(path: Path, stage: str, config, key: str, value: Any, origin: str) -> Any:
@@ -323,7 +355,7 @@ def _param_checked(path: Path, stage: str, config, key: str, value: Any, origin:
         value = config.check(key, value)
     except ParamError as e:
         raise _err(path, stage, f"{origin} sets {e.msg}", e.fix) from None
-    return list(value) if isinstance(value, tuple) else value      # the plain form hashed into the key
+    return list(value) if isinstance(value, tuple) else value  # the plain form hashed into the key
 
 
 def _resources(path: Path, stage: str, raw: Any, base: Resources, origin: str) -> Resources:
@@ -331,15 +363,26 @@ def _resources(path: Path, stage: str, raw: Any, base: Resources, origin: str) -
     if raw is None:
         return base
     if not isinstance(raw, dict):
-        raise _err(path, stage, f"{origin} is {kind(raw)}, not a mapping",
-                   "write e.g. `resources: {cpus: 1, gpus: 0, memory_gb: 2}`")
+        raise _err(
+            path,
+            stage,
+            f"{origin} is {kind(raw)}, not a mapping",
+            "write e.g. `resources: {cpus: 1, gpus: 0, memory_gb: 2}`",
+        )
     over = {}
     for key, value in raw.items():
         if key not in _RESOURCE_KEYS:
-            raise _err(path, stage, f"{origin} has unknown key '{key}'",
-                       f"use only {', '.join(_RESOURCE_KEYS)}{suggest(str(key), _RESOURCE_KEYS)}")
-        ok = (is_int(value) if _RESOURCE_KEYS[key] is int
-              else isinstance(value, (int, float)) and not isinstance(value, bool) and value == value)
+            raise _err(
+                path,
+                stage,
+                f"{origin} has unknown key '{key}'",
+                f"use only {', '.join(_RESOURCE_KEYS)}{suggest(str(key), _RESOURCE_KEYS)}",
+            )
+        ok = (
+            is_int(value)
+            if _RESOURCE_KEYS[key] is int
+            else isinstance(value, (int, float)) and not isinstance(value, bool) and value == value
+        )
         low = 1 if key == "cpus" else 0
         if not ok or value < low or value == float("inf"):
             want = "an integer" if _RESOURCE_KEYS[key] is int else "a number"
@@ -353,14 +396,22 @@ def check_files(pipe: Pipeline, name: str) -> None:
     s = pipe.stages[name]
     prog = pipe.program(name)
     if not prog.is_file():
-        raise _err(pipe.path, name, f"program '{s.run}' does not exist",
-                   f"write it, or point `run:` at an existing program (relative to {pipe.root})")
+        raise _err(
+            pipe.path,
+            name,
+            f"program '{s.run}' does not exist",
+            f"write it, or point `run:` at an existing program (relative to {pipe.root})",
+        )
     if prog.suffix != ".py" and not _executable(prog):
         raise _err(pipe.path, name, f"program '{s.run}' is not executable", f"chmod +x {s.run}, or use a .py file")
     for c in s.code:
         if not (pipe.root / c).exists():
-            raise _err(pipe.path, name, f"code path '{c}' does not exist",
-                       f"fix the path (relative to {pipe.root}) or remove it from `code:`")
+            raise _err(
+                pipe.path,
+                name,
+                f"code path '{c}' does not exist",
+                f"fix the path (relative to {pipe.root}) or remove it from `code:`",
+            )
 
 
 def _executable(p: Path) -> bool:
@@ -377,8 +428,12 @@ def _toposort(path: Path, stages: dict[str, Stage]) -> dict[str, Stage]:
         ready = [n for n, s in pending.items() if all(u in done for u in s.inputs.values())]
         if not ready:
             cycle = _find_cycle(pending)
-            raise _err(path, cycle[0], f"inputs form a cycle: {' -> '.join(cycle)}",
-                       "remove one of those inputs; the pipeline must be a DAG")
+            raise _err(
+                path,
+                cycle[0],
+                f"inputs form a cycle: {' -> '.join(cycle)}",
+                "remove one of those inputs; the pipeline must be a DAG",
+            )
         for n in ready:
             done[n] = pending.pop(n)
     return done
@@ -390,11 +445,12 @@ def _find_cycle(pending: dict[str, Stage]) -> list[str]:
     while node not in seen:
         seen.append(node)
         node = next(u for u in pending[node].inputs.values() if u in pending)
-    return seen[seen.index(node):] + [node]
+    return seen[seen.index(node) :] + [node]
 
 
-def _profiles(path: Path, raw: Any, stages: dict[str, Stage]
-              ) -> tuple[dict[str, dict[str, dict[str, Any]]], dict[str, str]]:
+def _profiles(
+    path: Path, raw: Any, stages: dict[str, Stage]
+) -> tuple[dict[str, dict[str, dict[str, Any]]], dict[str, str]]:
     """({profile: {stage: overrides}}, {profile: device}) of the ``profiles:`` block."""
     if raw is None:
         return {}, {}
@@ -404,27 +460,36 @@ def _profiles(path: Path, raw: Any, stages: dict[str, Stage]
     for pname, block in raw.items():
         block = block or {}
         if not isinstance(block, dict):
-            raise _err(path, None, f"profile '{pname}' is not a mapping of stage -> overrides",
-                       f"write `{pname}: {{STAGE: {{param: value}}}}`")
+            raise _err(
+                path,
+                None,
+                f"profile '{pname}' is not a mapping of stage -> overrides",
+                f"write `{pname}: {{STAGE: {{param: value}}}}`",
+            )
         block = dict(block)
         if "," in str(pname):
-            raise _err(path, None, f"profile name '{pname}' holds a comma", "`--profile a,b` lists profiles; "
-                       "rename it")
+            raise _err(path, None, f"profile name '{pname}' holds a comma", "`--profile a,b` lists profiles; rename it")
         if "device" in block:
             device = block.pop("device")
             if device not in DEVICES:
-                raise _err(path, None, f"profile '{pname}' asks for device {device!r}",
-                           f"use one of: {', '.join(DEVICES)}")
+                raise _err(
+                    path, None, f"profile '{pname}' asks for device {device!r}", f"use one of: {', '.join(DEVICES)}"
+                )
             devices[str(pname)] = device
         prof = {}
         for sname, over in block.items():
             if sname not in stages:
-                raise _err(path, None, f"profile '{pname}' names unknown stage '{sname}'",
-                           f"use one of: {', '.join(stages)}{suggest(sname, stages)}")
+                raise _err(
+                    path,
+                    None,
+                    f"profile '{pname}' names unknown stage '{sname}'",
+                    f"use one of: {', '.join(stages)}{suggest(sname, stages)}",
+                )
             over = over or {}
             if not isinstance(over, dict):
-                raise _err(path, sname, f"profile '{pname}' overrides are not a mapping",
-                           "write `STAGE: {param: value}`")
+                raise _err(
+                    path, sname, f"profile '{pname}' overrides are not a mapping", "write `STAGE: {param: value}`"
+                )
             for key, value in over.items():
                 _check_override(path, stages[sname], key, value, f"profile '{pname}'")
             prof[sname] = dict(over)
@@ -434,29 +499,40 @@ def _profiles(path: Path, raw: Any, stages: dict[str, Stage]
 
 def _check_override(path: Path, stage: Stage, key: str, value: Any, origin: str) -> Any:
     """Validate one override; returns the value in its canonical type (int -> float for float params)."""
-    if key == "resources":          # validated here; merged over the stage's current resources in _apply
+    if key == "resources":  # validated here; merged over the stage's current resources in _apply
         _resources(path, stage.name, value, stage.resources, f"{origin} resources")
         return {k: _RESOURCE_KEYS[k](v) for k, v in value.items()}
     if key == "engine":
         if value not in stage.engines:
-            raise _err(path, stage.name, f"{origin} sets engine '{value}', not one of {list(stage.engines)}",
-                       f"pick one of {', '.join(stage.engines)}{suggest(str(value), stage.engines)}")
+            raise _err(
+                path,
+                stage.name,
+                f"{origin} sets engine '{value}', not one of {list(stage.engines)}",
+                f"pick one of {', '.join(stage.engines)}{suggest(str(value), stage.engines)}",
+            )
         return value
     if stage.config is not None:
         return _param_checked(path, stage.name, stage.config, key, value, origin)
     if key not in stage.params:
-        raise _err(path, stage.name, f"{origin} sets unknown param '{key}'",
-                   f"params are: {', '.join(stage.params) or '(none)'}{suggest(key, stage.params)}")
+        raise _err(
+            path,
+            stage.name,
+            f"{origin} sets unknown param '{key}'",
+            f"params are: {', '.join(stage.params) or '(none)'}{suggest(key, stage.params)}",
+        )
     ok, coerced = coerce_like(stage.params[key], value)
     if not ok:
-        raise _err(path, stage.name, f"{origin} sets {key}={value!r} ({kind(value)}), but the default "
-                   f"{stage.params[key]!r} is {kind(stage.params[key])}",
-                   f"give {key} {article(type(stage.params[key]))} value")
+        raise _err(
+            path,
+            stage.name,
+            f"{origin} sets {key}={value!r} ({kind(value)}), but the default "
+            f"{stage.params[key]!r} is {kind(stage.params[key])}",
+            f"give {key} {article(type(stage.params[key]))} value",
+        )
     return coerced
 
 
-def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[str, ...] = ()
-            ) -> dict[str, Resolved]:
+def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[str, ...] = ()) -> dict[str, Resolved]:
     """Engine and params per stage: defaults, then ``profile`` (or the default profile), then ``sets``.
 
     ``sets`` are ``stage.param=value`` strings, the value parsed as YAML (``0.7``, ``[4, 4]``, ``true``);
@@ -468,17 +544,21 @@ def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[
     for name in profile_list(pipe, profile):
         for sname, over in pipe.profiles[name].items():
             for key, value in over.items():
-                _apply(out[sname], key, _check_override(pipe.path, out[sname].stage, key, value,
-                                                         f"profile '{name}'"), f"profile {name}")
+                _apply(
+                    out[sname],
+                    key,
+                    _check_override(pipe.path, out[sname].stage, key, value, f"profile '{name}'"),
+                    f"profile {name}",
+                )
     for item in sets:
         if "=" not in item or "." not in item.split("=", 1)[0]:
-            raise PipelineError(f"--set {item!r}: expected STAGE.PARAM=VALUE; fix: e.g. "
-                                f"--set detail.strength=0.7")
+            raise PipelineError(f"--set {item!r}: expected STAGE.PARAM=VALUE; fix: e.g. --set detail.strength=0.7")
         lhs, text = item.split("=", 1)
         sname, key = lhs.split(".", 1)
         if sname not in out:
-            raise PipelineError(f"--set {item!r}: unknown stage '{sname}'; fix: use one of: "
-                                f"{', '.join(out)}{suggest(sname, out)}")
+            raise PipelineError(
+                f"--set {item!r}: unknown stage '{sname}'; fix: use one of: {', '.join(out)}{suggest(sname, out)}"
+            )
         import yaml
 
         try:
@@ -486,8 +566,11 @@ def resolve(pipe: Pipeline, profile: str | None = None, sets: list[str] | tuple[
         except yaml.YAMLError:
             value = text
         # A bare word that YAML reads as a non-string stays a string when the param is a string.
-        if key in out[sname].stage.params and isinstance(out[sname].stage.params[key], str) \
-                and not isinstance(value, str):
+        if (
+            key in out[sname].stage.params
+            and isinstance(out[sname].stage.params[key], str)
+            and not isinstance(value, str)
+        ):
             value = text
         _apply(out[sname], key, _check_override(pipe.path, out[sname].stage, key, value, "--set"), "--set")
     return out
@@ -500,8 +583,10 @@ def profile_list(pipe: Pipeline, profile: str | None) -> list[str]:
     names = [n.strip() for n in text.split(",") if n.strip()]
     for name in names:
         if name not in pipe.profiles:
-            raise PipelineError(f"{pipe.path.name}: unknown profile '{name}'; fix: use one of: "
-                                f"{', '.join(pipe.profiles) or '(none defined)'}{suggest(name, pipe.profiles)}")
+            raise PipelineError(
+                f"{pipe.path.name}: unknown profile '{name}'; fix: use one of: "
+                f"{', '.join(pipe.profiles) or '(none defined)'}{suggest(name, pipe.profiles)}"
+            )
     return names
 
 

@@ -3,6 +3,7 @@
 Two bars on a TTY: steps done of the run, and the current step's own loop (from its ``@progress``
 lines). Without a TTY (CI, pipes, --json) one line per step and a progress line every 10 %.
 """
+
 from __future__ import annotations
 
 import sys
@@ -54,9 +55,15 @@ class RichDisplay(PlainDisplay):
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
         self.console = Console(file=out)
-        self.progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                 TimeElapsedColumn(), console=self.console, auto_refresh=False,
-                                 transient=True)
+        self.progress = Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=self.console,
+            auto_refresh=False,
+            transient=True,
+        )
         self.steps = None
         self.loop = None
 
@@ -91,8 +98,12 @@ class RichDisplay(PlainDisplay):
             self.progress.update(self.steps, completed=index)
         timing = f" in {seconds:.1f} s" if how == "ran" else ""
         colour = {"ran": "green", "cached": "dim", "cut off": "cyan", "used": "magenta"}.get(how, "")
-        self.console.print(f"[{index}/{total}] {name}: [{colour}]{how}[/]{timing}{note}" if colour
-                           else f"[{index}/{total}] {name}: {how}{timing}{note}", highlight=False)
+        self.console.print(
+            f"[{index}/{total}] {name}: [{colour}]{how}[/]{timing}{note}"
+            if colour
+            else f"[{index}/{total}] {name}: {how}{timing}{note}",
+            highlight=False,
+        )
         self.progress.refresh()
 
     def line(self, text: str) -> None:

@@ -1,6 +1,7 @@
 """Run records: one scene's state while the scheduler works through its DAG (:class:`SceneRun`), its
 ``runs/<id>/run.json`` (written as steps finish, so a killed run keeps what it finished), the
 no-new-run rule for a fully cached rerun, and a batch's pins (docs/store.md)."""
+
 from __future__ import annotations
 
 import time
@@ -19,16 +20,23 @@ class SceneRun:
         self.scene, self.ctx, self.opts = scene, ctx, opts
         self.selected, self.needed, self.forced = select(ctx.pipe, opts, ctx.uses)
         self.order = [n for n in ctx.pipe.stages if n in self.needed]
-        self.pending = list(self.order)           # not yet resolved (cached, used, or committed)
-        self.waiting: set[str] = set()            # submitted, or waiting on another scene's same key
+        self.pending = list(self.order)  # not yet resolved (cached, used, or committed)
+        self.waiting: set[str] = set()  # submitted, or waiting on another scene's same key
         self.outputs: dict[str, dict] = {}
         self.ran: set[str] = set()
         self.run_id: str | None = None
         self.failed: str | None = None
         self.t0: dict[str, float] = {}
-        self.summary: dict[str, Any] = {"pipeline": str(ctx.pipe.path), "store": str(ctx.store.root),
-                                        "prompt": ctx.prompt, "profile": ctx.profile, "seed": ctx.seed,
-                                        "device": ctx.device, "stages": {}, "ok": False}
+        self.summary: dict[str, Any] = {
+            "pipeline": str(ctx.pipe.path),
+            "store": str(ctx.store.root),
+            "prompt": ctx.prompt,
+            "profile": ctx.profile,
+            "seed": ctx.seed,
+            "device": ctx.device,
+            "stages": {},
+            "ok": False,
+        }
         if scene.label:
             self.summary.update(label=scene.label, sets=list(scene.sets))
 
@@ -55,10 +63,15 @@ def finish_run(st: SceneRun, latest: bool) -> None:
             summary["run"] = None
             return
         last = store.run_info(store.latest_run_id())
-        same = last is not None and last.get("prompt") == ctx.prompt and {
-            n: (s.get("key"), {k: v["digest"] for k, v in s.get("outputs", {}).items()})
-            for n, s in last.get("stages", {}).items()} == {
-            n: (e.get("key"), e["outputs"]) for n, e in summary["stages"].items()}
+        same = (
+            last is not None
+            and last.get("prompt") == ctx.prompt
+            and {
+                n: (s.get("key"), {k: v["digest"] for k, v in s.get("outputs", {}).items()})
+                for n, s in last.get("stages", {}).items()
+            }
+            == {n: (e.get("key"), e["outputs"]) for n, e in summary["stages"].items()}
+        )
         if same or not summary["ok"]:
             summary["run"] = store.latest_run_id() if same else None
             return
@@ -80,12 +93,26 @@ def finish_batch(store: Store, states: list[SceneRun]) -> None:
 
 def write_run(st: SceneRun, latest: bool) -> None:
     ctx, summary = st.ctx, st.summary
-    stages = {n: {"key": e.get("key"), "how": e["how"], "outputs": st.outputs[n],
-                  **{k: e[k] for k in ("source", "import") if k in e}}
-              for n, e in summary["stages"].items()}
-    info = {"run": st.run_id, "pipeline": str(ctx.pipe.path), "prompt": ctx.prompt, "profile": ctx.profile,
-            "seed": ctx.seed, "ok": summary["ok"], "seconds": summary.get("seconds"), "stages": stages,
-            "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    stages = {
+        n: {
+            "key": e.get("key"),
+            "how": e["how"],
+            "outputs": st.outputs[n],
+            **{k: e[k] for k in ("source", "import") if k in e},
+        }
+        for n, e in summary["stages"].items()
+    }
+    info = {
+        "run": st.run_id,
+        "pipeline": str(ctx.pipe.path),
+        "prompt": ctx.prompt,
+        "profile": ctx.profile,
+        "seed": ctx.seed,
+        "ok": summary["ok"],
+        "seconds": summary.get("seconds"),
+        "stages": stages,
+        "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
     if st.scene.label:
         info.update(label=st.scene.label, sets=list(st.scene.sets))
     ctx.store.write_run(st.run_id, info, latest=latest)

@@ -8,6 +8,7 @@ key record is written last (holoflow/flow/executors/step.py, docs/store.md). Exe
 resource slots, or Ray) only decide where and when a step runs (docs/scale.md). Nothing here imports
 numpy, torch or subprocess: a fully cached run and ``status`` cost a few stats and JSON reads.
 """
+
 from __future__ import annotations
 
 import json
@@ -66,19 +67,26 @@ def run_batch(scenes: list[BatchItem], display, lock_message=print, executor=Non
             if n not in st.ctx.uses and n in st.selected:
                 check_files(pipe, n)
     if opts.dry_run:
-        return {"dry_run": True, "ok": True,
-                "scenes": [{**dry_run(st.ctx, st.order, st.selected, st.forced),
-                            **({"label": st.scene.label} if st.scene.label else {})} for st in states]}
+        return {
+            "dry_run": True,
+            "ok": True,
+            "scenes": [
+                {
+                    **dry_run(st.ctx, st.order, st.selected, st.forced),
+                    **({"label": st.scene.label} if st.scene.label else {}),
+                }
+                for st in states
+            ],
+        }
     store.ensure()
     store.lock(opts.lock_timeout, "run", lock_message)
-    try:                        # SIGTERM and SIGHUP (a closed terminal or ssh) stop it like Ctrl-C
+    try:  # SIGTERM and SIGHUP (a closed terminal or ssh) stop it like Ctrl-C
         old_handler = {sig: signal.signal(sig, _raise_interrupted) for sig in (signal.SIGTERM, signal.SIGHUP)}
-    except ValueError:          # not the main thread: leave signals to the caller
+    except ValueError:  # not the main thread: leave signals to the caller
         old_handler = None
     batch = {"ok": False, "scenes": [st.summary for st in states]}
     t_run = time.monotonic()
-    make = (lambda: executor) if executor is not None else (
-        lambda: make_executor_for(opts, first.ctx.device, display))
+    make = (lambda: executor) if executor is not None else (lambda: make_executor_for(opts, first.ctx.device, display))
     sched = _Scheduler(states, make, display, opts.retries)
     try:
         sched.warn_dropped_uses()
@@ -103,15 +111,18 @@ def run_batch(scenes: list[BatchItem], display, lock_message=print, executor=Non
                 finish_run(st, latest=len(states) == 1)
             if len(states) > 1:
                 finish_batch(store, states)
-        except OSError as e:    # a full / read-only store: the step's own error already says so
+        except OSError as e:  # a full / read-only store: the step's own error already says so
             if store_problem(e) is None or not any(st.failed for st in states):
                 raise
         finally:
             store.unlock()
     failed = [st for st in states if st.failed]
     if failed:
-        more = f"\n({len(failed) - 1} more scene(s) failed: {', '.join(s.scene.label for s in failed[1:])})" \
-            if len(failed) > 1 else ""
+        more = (
+            f"\n({len(failed) - 1} more scene(s) failed: {', '.join(s.scene.label for s in failed[1:])})"
+            if len(failed) > 1
+            else ""
+        )
         err = StepFailed(failed[0].failed + more)
         err.batch = batch
         raise err
@@ -130,8 +141,15 @@ def make_executor_for(opts: Options, device: str, display):
         elif opts.verbose and not line.startswith("@meta "):
             display.line(f"    {label}| {line}")
 
-    return make_executor(opts.executor, opts.jobs, opts.address, device, on_line=on_line, warm=not opts.cold,
-                         connect_timeout=opts.connect_timeout)
+    return make_executor(
+        opts.executor,
+        opts.jobs,
+        opts.address,
+        device,
+        on_line=on_line,
+        warm=not opts.cold,
+        connect_timeout=opts.connect_timeout,
+    )
 
 
 class _Scheduler:
@@ -139,21 +157,23 @@ class _Scheduler:
 
     def __init__(self, states: list[SceneRun], make_executor, display, retries: int | None):
         self.states, self.make_executor, self.display, self._retries = states, make_executor, display, retries
-        self.executor_made = None                 # made on the first step to run (a cached run needs none)
-        self.expected = False                     # the executor was told the steps to come (expect)
+        self.executor_made = None  # made on the first step to run (a cached run needs none)
+        self.expected = False  # the executor was told the steps to come (expect)
         self.total = sum(len(st.order) for st in states)
         self.done = 0
-        self.inflight: dict[str, _Job] = {}       # key -> job (queued or running)
-        self.queue: list[_Job] = []               # jobs not yet submitted (in resolution order)
-        self.running: dict[int, _Job] = {}        # executor handle -> job
-        self.forced_done: dict[str, dict] = {}    # forced keys recomputed in this batch -> record
+        self.inflight: dict[str, _Job] = {}  # key -> job (queued or running)
+        self.queue: list[_Job] = []  # jobs not yet submitted (in resolution order)
+        self.running: dict[int, _Job] = {}  # executor handle -> job
+        self.forced_done: dict[str, dict] = {}  # forced keys recomputed in this batch -> record
 
     def warn_dropped_uses(self) -> None:
         for st in self.states:
             for name, source in dropped_uses(st.ctx).items():
                 if name in st.needed:
-                    self.display.line(f"note: the latest run took {name} from {source} (--use); "
-                                      f"this run does not: pass --use {name}=... again to keep it")
+                    self.display.line(
+                        f"note: the latest run took {name} from {source} (--use); "
+                        f"this run does not: pass --use {name}=... again to keep it"
+                    )
 
     @property
     def executor(self):
@@ -173,7 +193,7 @@ class _Scheduler:
             while self.queue and self.executor.fits(self.queue[0].task.resources):
                 self.submit(self.queue.pop(0))
             if not self.running:
-                if self.queue:      # nothing runs and the head does not fit: cannot happen (clamped)
+                if self.queue:  # nothing runs and the head does not fit: cannot happen (clamped)
                     raise RuntimeError(f"step {self.queue[0].task.label} can never be scheduled")
                 return
             for handle, result in self.executor.wait(timeout=0.5):
@@ -192,7 +212,7 @@ class _Scheduler:
             st.t0.setdefault(name, time.monotonic())
             if name in ctx.uses:
                 st.outputs[name] = import_use(ctx, name, ctx.uses[name])
-                st.ran.add(name)             # downstream of an import is not an early cutoff
+                st.ran.add(name)  # downstream of an import is not an early cutoff
                 info = {"how": "used", "source": str(ctx.uses[name]), "key": None}
                 if name in ctx.imports:
                     info["import"] = ctx.imports[name]
@@ -209,8 +229,10 @@ class _Scheduler:
                 continue
             if name not in st.selected:
                 why = "; ".join(explain(ctx, name, comp))
-                raise PipelineError(f"stage '{name}' is needed but has no cached result ({why}); fix: "
-                                    f"run it too (drop --from/--only, or widen --until)")
+                raise PipelineError(
+                    f"stage '{name}' is needed but has no cached result ({why}); fix: "
+                    f"run it too (drop --from/--only, or widen --until)"
+                )
             st.waiting.add(name)
             if key in self.inflight:
                 self.inflight[key].waiters.append((st, name))
@@ -227,30 +249,61 @@ class _Scheduler:
                 ctx.store.link_outputs(st.run_id, done, st.outputs[done])
             write_run(st, latest=len(self.states) == 1)
         stage, r = pipe.stages[name], ctx.resolved[name]
-        spec = {"stage": name, "engine": r.engine, "params": r.params, "seed": ctx.seed,
-                "prompt": ctx.prompt or "", "device": ctx.device,
-                "inputs": {inp: str(ctx.store.run_dir(st.run_id) / up) for inp, up in stage.inputs.items()},
-                "key": key, "run": st.run_id, "cpus": r.resources.cpus}
-        prov = {"run": st.run_id, "engine": r.engine, "params": r.params, "seed": ctx.seed, "device": ctx.device,
-                "inputs": {inp: {"stage": up, "outputs": {k: v["digest"] for k, v in st.outputs[up].items()}}
-                           for inp, up in stage.inputs.items()},
-                "program": stage.run}
-        return StepTask(store=str(ctx.store.root), stage=name, label=st.name(name), key=key, components=comp,
-                        spec=spec, program=str(pipe.program(name)), cwd=str(pipe.root),
-                        resources=r.resources.as_dict(), provenance=prov, replace=forced,
-                        modules=sorted(ctx.hasher.external(pipe.program(name))))
+        spec = {
+            "stage": name,
+            "engine": r.engine,
+            "params": r.params,
+            "seed": ctx.seed,
+            "prompt": ctx.prompt or "",
+            "device": ctx.device,
+            "inputs": {inp: str(ctx.store.run_dir(st.run_id) / up) for inp, up in stage.inputs.items()},
+            "key": key,
+            "run": st.run_id,
+            "cpus": r.resources.cpus,
+        }
+        prov = {
+            "run": st.run_id,
+            "engine": r.engine,
+            "params": r.params,
+            "seed": ctx.seed,
+            "device": ctx.device,
+            "inputs": {
+                inp: {"stage": up, "outputs": {k: v["digest"] for k, v in st.outputs[up].items()}}
+                for inp, up in stage.inputs.items()
+            },
+            "program": stage.run,
+        }
+        return StepTask(
+            store=str(ctx.store.root),
+            stage=name,
+            label=st.name(name),
+            key=key,
+            components=comp,
+            spec=spec,
+            program=str(pipe.program(name)),
+            cwd=str(pipe.root),
+            resources=r.resources.as_dict(),
+            provenance=prov,
+            replace=forced,
+            modules=sorted(ctx.hasher.external(pipe.program(name))),
+        )
 
     def submit(self, job: _Job) -> None:
         if not self.expected and self.executor.kind == "local":
             self.expected = True
             to_come = [(st, n) for st in self.states for n in st.pending if n not in st.ctx.uses]
-            self.executor.expect([(st.ctx.resolved[n].resources.as_dict(), sorted(st.ctx.hasher.external(
-                st.ctx.pipe.program(n)))) for st, n in to_come],
-                ahead.modules_for([st.ctx.hasher.files(st.ctx.pipe.program(n)) for st, n in to_come]))
-        for st, name in job.waiters:              # "ran in" counts from the start, not the queue
+            self.executor.expect(
+                [
+                    (st.ctx.resolved[n].resources.as_dict(), sorted(st.ctx.hasher.external(st.ctx.pipe.program(n))))
+                    for st, n in to_come
+                ],
+                ahead.modules_for([st.ctx.hasher.files(st.ctx.pipe.program(n)) for st, n in to_come]),
+            )
+        for st, name in job.waiters:  # "ran in" counts from the start, not the queue
             st.t0[name] = time.monotonic()
-        self.display.start_step(job.task.label, self.done + 1, self.total,
-                                f" (attempt {job.task.attempt})" if job.task.attempt > 1 else "")
+        self.display.start_step(
+            job.task.label, self.done + 1, self.total, f" (attempt {job.task.attempt})" if job.task.attempt > 1 else ""
+        )
         self.running[self.executor.submit(job.task)] = job
 
     def finish(self, job: _Job, result: dict) -> None:
@@ -260,8 +313,7 @@ class _Scheduler:
                 return
             where = f" on {result['host']}" if result.get("host") and self.executor.kind != "local" else ""
             if task.attempt <= self.retries and not result.get("bad_output") and not result.get("store_error"):
-                self.display.line(f"{task.label}: attempt {task.attempt} failed ({result['reason']}{where}); "
-                                  f"retrying")
+                self.display.line(f"{task.label}: attempt {task.attempt} failed ({result['reason']}{where}); retrying")
                 task.attempt += 1
                 self.queue.insert(0, job)
                 return
@@ -273,8 +325,10 @@ class _Scheduler:
                 msg = f"stage '{task.label}' was not committed: {result['reason']}"
             else:
                 where_log = f"--- last lines of {result['log']} ---" if result.get("log") else "---"
-                msg = (f"stage '{task.label}' failed ({result['reason']}{where}{tries}); nothing from it was "
-                       f"committed; earlier steps are kept.\n{where_log}\n{result.get('tail', '')}")
+                msg = (
+                    f"stage '{task.label}' failed ({result['reason']}{where}{tries}); nothing from it was "
+                    f"committed; earlier steps are kept.\n{where_log}\n{result.get('tail', '')}"
+                )
             for st, name in job.waiters:
                 st.failed = st.failed or msg
                 st.waiting.discard(name)
@@ -284,8 +338,11 @@ class _Scheduler:
         if task.replace:
             self.forced_done[task.key] = rec
         chosen = chosen_engine(rec)
-        note = (_rss_note(rec) + (f" on {result['host']}" if self.executor.kind != "local" else "")
-                + (f"; {engine_note(chosen)}" if chosen else ""))
+        note = (
+            _rss_note(rec)
+            + (f" on {result['host']}" if self.executor.kind != "local" else "")
+            + (f"; {engine_note(chosen)}" if chosen else "")
+        )
         for i, (st, name) in enumerate(job.waiters):
             st.waiting.discard(name)
             st.outputs[name] = rec["outputs"]
@@ -308,7 +365,7 @@ class _Scheduler:
         st.summary["stages"][name] = entry
         if st.run_id is not None:
             st.ctx.store.link_outputs(st.run_id, name, st.outputs[name])
-            write_run(st, latest=len(self.states) == 1)      # a killed run keeps what it finished
+            write_run(st, latest=len(self.states) == 1)  # a killed run keeps what it finished
 
 
 def _raise_interrupted(signum, frame):

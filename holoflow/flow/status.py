@@ -1,6 +1,7 @@
 """Status: per stage, whether its cached result is fresh, stale or missing, and why in the user's words
 (`holoflow status`, `run --dry-run`, docs/cli.md). Reads only small JSON records and stats sources.
 """
+
 from __future__ import annotations
 
 import shlex
@@ -58,8 +59,11 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
                 outputs[name] = import_cache(ctx, src_sha) or outputs[name]  # the converted EXR's digest
             continue
         if s.prompt and ctx.prompt is None:
-            out[name] = {"state": "missing", "key": None,
-                         "reasons": ["no prompt yet (holoflow status \"PROMPT\", or run once)"]}
+            out[name] = {
+                "state": "missing",
+                "key": None,
+                "reasons": ['no prompt yet (holoflow status "PROMPT", or run once)'],
+            }
             continue
         bad_up = [u for u in s.inputs.values() if u not in outputs]
         if bad_up:
@@ -68,9 +72,11 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
             own = [r for r in own if r not in ("never run", "key changed")]
             ups = sorted(set(bad_up), key=list(ctx.pipe.stages).index)
             never = store.last_key(name) is None
-            out[name] = {"state": "missing" if never else "stale", "key": None,
-                         "reasons": (["never run"] if never else own)
-                         + [f"upstream not fresh: {', '.join(ups)}"]}
+            out[name] = {
+                "state": "missing" if never else "stale",
+                "key": None,
+                "reasons": (["never run"] if never else own) + [f"upstream not fresh: {', '.join(ups)}"],
+            }
             continue
         comp = ctx.components(name, outputs)
         key = cache_key(comp)
@@ -84,16 +90,20 @@ def status(ctx: Context, order: list[str] | None = None) -> dict[str, dict[str, 
                     out[name]["engine"] = {"ran": chosen["engine"], "why": chosen.get("why", "")}
                 outputs[name] = rec["outputs"]
                 continue
-            out[name] = {"state": "missing", "key": key,
-                         "reasons": [f"output missing or corrupted: {', '.join(missing[:3])}"]}
+            out[name] = {
+                "state": "missing",
+                "key": key,
+                "reasons": [f"output missing or corrupted: {', '.join(missing[:3])}"],
+            }
             continue
         why = explain(ctx, name, comp)
-        out[name] = {"state": "missing" if why == ["never run"] else "stale", "reasons": why,
-                     "key": key}
+        out[name] = {"state": "missing" if why == ["never run"] else "stale", "reasons": why, "key": key}
     for name, source in dropped_uses(ctx).items():  # the latest run's own file is not in this view
         if name in out and out[name]["state"] != "fresh":
-            out[name]["reasons"].append(f"the latest run used {source} (--use): "
-                                        f"holoflow status --use {shlex.quote(f'{name}={source}')} shows that run")
+            out[name]["reasons"].append(
+                f"the latest run used {source} (--use): "
+                f"holoflow status --use {shlex.quote(f'{name}={source}')} shows that run"
+            )
     ctx.hasher.save()
     return out
 
@@ -134,7 +144,7 @@ def _digests_of(path: Path, primary: str | None) -> dict[str, dict]:
     from .store import sha256_file
 
     if path.is_dir():
-        return {p.relative_to(path).as_posix(): {"digest": sha256_file(p)} for p in sorted(path.rglob("*"))
-                if p.is_file()}
+        return {
+            p.relative_to(path).as_posix(): {"digest": sha256_file(p)} for p in sorted(path.rglob("*")) if p.is_file()
+        }
     return {primary or path.name: {"digest": sha256_file(path)}}
-

@@ -25,6 +25,7 @@ names are unique per writer, and both objects and key records are created with `
 replaces an existing name: when several workers finish the same key at once the first commit wins and
 the others adopt it (an object's bytes are identical by construction: its name is their hash).
 """
+
 from __future__ import annotations
 
 import errno
@@ -76,7 +77,7 @@ def _write_tmp(path: Path, text: str) -> Path:
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
-    except BaseException:       # a full disk: leave no partial file behind
+    except BaseException:  # a full disk: leave no partial file behind
         try:
             tmp.unlink()
         except OSError:
@@ -141,8 +142,10 @@ class Store:
             probe.write_bytes(b"")
             probe.unlink()
         except OSError as e:
-            raise StoreError(f"store {self.root} is not writable ({e.strerror}); fix: pass --store DIR "
-                             f"or set HOLOFLOW_STORE to a writable folder") from None
+            raise StoreError(
+                f"store {self.root} is not writable ({e.strerror}); fix: pass --store DIR "
+                f"or set HOLOFLOW_STORE to a writable folder"
+            ) from None
 
     # -- lock -----------------------------------------------------------------------------------
     def lock(self, timeout: float | None = None, what: str = "run", wait_message=None) -> None:
@@ -154,8 +157,11 @@ class Store:
         except BlockingIOError:
             holder = _read_fd(fd)
             if wait_message:
-                wait_message(f"store {self.root} is locked by {holder or 'another holoflow'}; waiting"
-                             + (f" up to {timeout:g} s" if timeout is not None else "") + " ...")
+                wait_message(
+                    f"store {self.root} is locked by {holder or 'another holoflow'}; waiting"
+                    + (f" up to {timeout:g} s" if timeout is not None else "")
+                    + " ..."
+                )
             deadline = None if timeout is None else time.monotonic() + timeout
             while True:
                 try:
@@ -164,10 +170,12 @@ class Store:
                 except BlockingIOError:
                     if deadline is not None and time.monotonic() >= deadline:
                         os.close(fd)
-                        raise StoreError(f"store {self.root} still locked by {holder or 'another holoflow'}"
-                                         f" after {timeout:g} s; fix: wait for it, or raise --lock-timeout")
+                        raise StoreError(
+                            f"store {self.root} still locked by {holder or 'another holoflow'}"
+                            f" after {timeout:g} s; fix: wait for it, or raise --lock-timeout"
+                        )
                     time.sleep(0.1)
-        try:                    # who holds it, for the next one that waits (not on a full disk)
+        try:  # who holds it, for the next one that waits (not on a full disk)
             os.ftruncate(fd, 0)
             os.pwrite(fd, f"pid {os.getpid()} ({what}, since {time.strftime('%H:%M:%S')})".encode(), 0)
         except OSError:
@@ -217,7 +225,7 @@ class Store:
             pass
         dest.parent.mkdir(exist_ok=True)
         os.chmod(src, 0o444)
-        link_or_replace(src, dest)      # another worker may have committed the same bytes meanwhile
+        link_or_replace(src, dest)  # another worker may have committed the same bytes meanwhile
         st = dest.stat()
         return {"digest": digest, "size": st.st_size, "mtime_ns": st.st_mtime_ns}
 
@@ -246,8 +254,10 @@ class Store:
         dest.parent.mkdir(exist_ok=True)
         try:
             os.replace(src, dest)
-            print(f"holoflow: object {digest[:12]} no longer matches its hash; moved to {dest} "
-                  f"and will be recomputed", file=sys.stderr)
+            print(
+                f"holoflow: object {digest[:12]} no longer matches its hash; moved to {dest} and will be recomputed",
+                file=sys.stderr,
+            )
             return dest
         except FileNotFoundError:
             return None
@@ -280,8 +290,11 @@ class Store:
         except OSError as e:
             where = f"left in place ({e.strerror})"
         if say:
-            print(f"holoflow: key record {path.name} is damaged (not complete JSON); {where}; its step will "
-                  f"be recomputed", file=sys.stderr)
+            print(
+                f"holoflow: key record {path.name} is damaged (not complete JSON); {where}; its step will "
+                f"be recomputed",
+                file=sys.stderr,
+            )
 
     def write_record(self, rec: dict, replace: bool = True) -> dict:
         """Commit a key record; returns the record now in force.
@@ -298,8 +311,8 @@ class Store:
             existing = self.record(rec["key"])
             if existing is not None and self.outputs_ok(existing):
                 return existing
-            write_atomic(path, json.dumps(rec, indent=1, sort_keys=True))     # the old one was damaged
-        try:                    # committed above; the pointer only serves `status` reasons
+            write_atomic(path, json.dumps(rec, indent=1, sort_keys=True))  # the old one was damaged
+        try:  # committed above; the pointer only serves `status` reasons
             write_atomic(self.root / "stages" / f"{rec['stage']}.json", json.dumps({"key": rec["key"]}))
         except OSError:
             pass
@@ -365,8 +378,10 @@ class Store:
 
     def pin(self, run_id: str, on: bool = True) -> None:
         if not (self.run_dir(run_id) / "run.json").is_file():
-            raise StoreError(f"no run '{run_id}' in {self.root}; fix: pick one of: "
-                             f"{', '.join(self.run_ids()[-5:]) or '(no runs yet)'}")
+            raise StoreError(
+                f"no run '{run_id}' in {self.root}; fix: pick one of: "
+                f"{', '.join(self.run_ids()[-5:]) or '(no runs yet)'}"
+            )
         p = self.root / "pins" / run_id
         if on:
             p.parent.mkdir(exist_ok=True)
@@ -382,15 +397,15 @@ class Store:
         every object those records name (outputs and logs).
         """
         keep_runs = set(self.pinned())
-        if (latest := self.latest_run_id()):
+        if latest := self.latest_run_id():
             keep_runs.add(latest)
         keep_keys = set()
         for rid in keep_runs:
             info = self.run_info(rid) or {}
             keep_keys.update(s["key"] for s in info.get("stages", {}).values() if s.get("key"))
         sdir = self.root / "stages"
-        for p in (sdir.iterdir() if sdir.is_dir() else []):
-            if (k := (read_json(p) or {}).get("key")):
+        for p in sdir.iterdir() if sdir.is_dir() else []:
+            if k := (read_json(p) or {}).get("key"):
                 keep_keys.add(k)
         keep_objects = set()
         all_keys = sorted((self.root / "keys").glob("*.json"))
@@ -400,18 +415,23 @@ class Store:
             if key in keep_keys:
                 rec = read_json(kp) or {}
                 keep_objects.update(e["digest"] for e in rec.get("outputs", {}).values())
-                if (log := rec.get("provenance", {}).get("log")):
+                if log := rec.get("provenance", {}).get("log"):
                     keep_objects.add(log)
             else:
                 drop_keys.append(kp)
-        for rid in keep_runs:      # imported (--use) outputs are named only by their run
+        for rid in keep_runs:  # imported (--use) outputs are named only by their run
             info = self.run_info(rid) or {}
             for s in info.get("stages", {}).values():
                 keep_objects.update(e["digest"] for e in s.get("outputs", {}).values())
         drop_objects = [p for p in self.iter_objects() if p.name not in keep_objects]
         drop_runs = [self.run_dir(r) for r in self.run_ids() if r not in keep_runs]
-        return {"runs": drop_runs, "keys": drop_keys, "objects": drop_objects,
-                "bytes": sum(p.stat().st_size for p in drop_objects), "kept_runs": sorted(keep_runs)}
+        return {
+            "runs": drop_runs,
+            "keys": drop_keys,
+            "objects": drop_objects,
+            "bytes": sum(p.stat().st_size for p in drop_objects),
+            "kept_runs": sorted(keep_runs),
+        }
 
     def gc_apply(self, plan: dict[str, Any]) -> None:
         for d in plan["runs"]:
@@ -440,8 +460,7 @@ class Store:
                 if not self.object_path(e["digest"]).is_file():
                     missing.append((rec.get("stage", "?"), rel))
         stray = list((self.root / "tmp").iterdir()) if (self.root / "tmp").is_dir() else []
-        return {"corrupt": bad, "missing": missing, "damaged_records": damaged,
-                "stray_tmp": [str(p) for p in stray]}
+        return {"corrupt": bad, "missing": missing, "damaged_records": damaged, "stray_tmp": [str(p) for p in stray]}
 
 
 def _read_fd(fd: int) -> str:

@@ -1,5 +1,6 @@
 """The text summary of a run, a batch or a sweep (`holoflow run`, `run --prompts`, `sweep`; --json prints
 the same dicts as JSON instead)."""
+
 from __future__ import annotations
 
 import json
@@ -27,9 +28,13 @@ def summary_lines(result: dict[str, Any], store: Store) -> list[str]:
     lines = []
     for sc in scenes:
         sets = f" [{' '.join(sc['sets'])}]" if sc.get("sets") else ""
-        lines.append(f"{sc['label']}: {_counts(sc) or 'nothing'}; run {sc.get('run')}; {json.dumps(sc['prompt'])}{sets}")
-    lines.append(f"holoflow: batch of {len(scenes)} scenes done in {result['seconds']:.2f} s "
-                 f"({result.get('executor', 'all cached')}); runs pinned, latest -> the last scene")
+        lines.append(
+            f"{sc['label']}: {_counts(sc) or 'nothing'}; run {sc.get('run')}; {json.dumps(sc['prompt'])}{sets}"
+        )
+    lines.append(
+        f"holoflow: batch of {len(scenes)} scenes done in {result['seconds']:.2f} s "
+        f"({result.get('executor', 'all cached')}); runs pinned, latest -> the last scene"
+    )
     return lines
 
 

@@ -1,6 +1,7 @@
 """Your own files as a stage's outputs (`holoflow run --use STAGE=PATH`): checked, imported into the
 store (an image panorama decoded to the stage's linear EXR), and remembered so `status` sees the same
 digests without decoding again."""
+
 from __future__ import annotations
 
 import json
@@ -23,8 +24,11 @@ def import_note(facts: dict | None) -> str:
 def dropped_uses(ctx: Context) -> dict[str, str]:
     """Stages the latest run took from a user's file (``--use``) that ``ctx`` does not: stage -> source."""
     latest = ctx.store.run_info(ctx.store.latest_run_id()) or {}
-    return {name: str(s.get("source")) for name, s in latest.get("stages", {}).items()
-            if s.get("how") == "used" and name not in ctx.uses}
+    return {
+        name: str(s.get("source"))
+        for name, s in latest.get("stages", {}).items()
+        if s.get("how") == "used" and name not in ctx.uses
+    }
 
 
 def import_use(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
@@ -41,9 +45,11 @@ def import_use(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     else:
         name = s.primary or src.name
         if s.primary and Path(s.primary).suffix.lower() != src.suffix.lower():
-            raise PipelineError(f"--use {stage}={src}: {stage}'s main output is {s.primary}, got a "
-                                f"{src.suffix or 'suffix-less'} file; fix: convert it (e.g. oiiotool IN -o "
-                                f"OUT{Path(s.primary).suffix})")
+            raise PipelineError(
+                f"--use {stage}={src}: {stage}'s main output is {s.primary}, got a "
+                f"{src.suffix or 'suffix-less'} file; fix: convert it (e.g. oiiotool IN -o "
+                f"OUT{Path(s.primary).suffix})"
+            )
         files = {name: src}
     for rel, p in files.items():
         _validate_file(stage, p)
@@ -84,8 +90,15 @@ def _import_image(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     except (ImageImportError, InputRefused) as e:
         raise PipelineError(f"--use {stage}: {e}") from None
     tmp = ctx.store.staging(f"use-{stage}") / "f.exr"
-    write_rgb(tmp, rgb, {"holoflow.source": facts["file"], "holoflow.source_sha256": facts["sha256"],
-                         "holoflow.source_colour": facts["colour"]})
+    write_rgb(
+        tmp,
+        rgb,
+        {
+            "holoflow.source": facts["file"],
+            "holoflow.source_sha256": facts["sha256"],
+            "holoflow.source_colour": facts["colour"],
+        },
+    )
     out = {ctx.pipe.stages[stage].primary: ctx.store.put(tmp)}
     tmp.parent.rmdir()
     ctx.imports[stage] = facts
@@ -102,7 +115,7 @@ def _import_exr(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     from .store import sha256_file
 
     s = ctx.pipe.stages[stage]
-    equirect = s.config is not None and s.config.__module__.startswith("holoflow.")   # holoflow's own EXR stages
+    equirect = s.config is not None and s.config.__module__.startswith("holoflow.")  # holoflow's own EXR stages
     try:
         channels, attrs, facts = check_exr(src, equirect)
     except InputRefused as e:
@@ -111,8 +124,11 @@ def _import_exr(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
         return _copy_in(ctx, stage, {ctx.pipe.stages[stage].primary: src})
     sha = sha256_file(src)
     tmp = ctx.store.staging(f"use-{stage}") / "f.exr"
-    write_exr(tmp, channels, {**attrs, "holoflow.source": src.name, "holoflow.source_sha256": sha,
-                              "holoflow.import_notes": facts})
+    write_exr(
+        tmp,
+        channels,
+        {**attrs, "holoflow.source": src.name, "holoflow.source_sha256": sha, "holoflow.import_notes": facts},
+    )
     out = {ctx.pipe.stages[stage].primary: ctx.store.put(tmp)}
     tmp.parent.rmdir()
     ctx.imports[stage] = {"file": src.name, "sha256": sha, **facts}
@@ -120,8 +136,7 @@ def _import_exr(ctx: Context, stage: str, src: Path) -> dict[str, dict]:
     return out
 
 
-def import_cache(ctx: Context, source_sha: str, outputs: dict | None = None, facts: dict | None = None
-                 ) -> dict | None:
+def import_cache(ctx: Context, source_sha: str, outputs: dict | None = None, facts: dict | None = None) -> dict | None:
     """Remember (``outputs`` given) or look up the outputs an image file imported to, by the file's
     sha256 and the decoder's code (holoflow/io/image.py and what it imports), so that ``status`` sees
     the same input digests as the run and a rerun skips the decode. A lookup returns the outputs, or
@@ -140,8 +155,9 @@ def import_cache(ctx: Context, source_sha: str, outputs: dict | None = None, fac
         table = {}
     if outputs is None:
         entry = table.get(key)
-        if not isinstance(entry, dict) or not all(ctx.store.object_path(o["digest"]).is_file()
-                                                  for o in entry.get("outputs", {}).values()):
+        if not isinstance(entry, dict) or not all(
+            ctx.store.object_path(o["digest"]).is_file() for o in entry.get("outputs", {}).values()
+        ):
             return None
         if facts:
             return entry if "facts" in entry else None
@@ -162,8 +178,10 @@ def _validate_file(stage: str, p: Path) -> None:
         try:
             read_exr(p)
         except ExrError as e:
-            raise PipelineError(f"--use {stage}: {p} does not open as EXR ({e}); fix: pass an OpenEXR "
-                                f"file (e.g. oiiotool IN -o OUT.exr)") from None
+            raise PipelineError(
+                f"--use {stage}: {p} does not open as EXR ({e}); fix: pass an OpenEXR "
+                f"file (e.g. oiiotool IN -o OUT.exr)"
+            ) from None
     elif ext == ".ply":
         from plyfile import PlyData
 
@@ -171,8 +189,9 @@ def _validate_file(stage: str, p: Path) -> None:
             with open(p, "rb") as f:
                 PlyData.read(f)
         except Exception as e:  # plyfile raises several types for a broken file
-            raise PipelineError(f"--use {stage}: {p} does not open as PLY ({type(e).__name__}: {e}); fix: "
-                                f"pass a valid PLY file") from None
+            raise PipelineError(
+                f"--use {stage}: {p} does not open as PLY ({type(e).__name__}: {e}); fix: pass a valid PLY file"
+            ) from None
 
 
 # -- planning ------------------------------------------------------------------------------------

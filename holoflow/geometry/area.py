@@ -28,6 +28,7 @@ the Gaussians render a piecewise-constant image, not the linear interpolation be
 rows that its own views show; rows of the panorama upsampled bilinearly carry that interpolation in
 their samples (docs/reconstruction.md has the measurements).
 """
+
 from __future__ import annotations
 
 import math
@@ -63,8 +64,13 @@ class PolarCaps:
         return 2.0 * math.pi * torch.cos(lat) / n
 
     def to_json(self) -> dict:
-        return {"split_deg": self.split_deg, "width": self.width, "ring_points": self.ring_points,
-                "north": self.north, "south": self.south}
+        return {
+            "split_deg": self.split_deg,
+            "width": self.width,
+            "ring_points": self.ring_points,
+            "north": self.north,
+            "south": self.south,
+        }
 
     def holds(self, lat: torch.Tensor) -> torch.Tensor:
         """[...] bool: latitudes lat [...] (radians) inside a cap that is on."""
@@ -72,8 +78,9 @@ class PolarCaps:
         return ((lat > edge) & self.north) | ((lat < -edge) & self.south)
 
 
-def polar_caps(pf_width: int, pano_width: int, density: float, from_deg: float,
-               upsample: float = 2.0) -> PolarCaps | None:
+def polar_caps(
+    pf_width: int, pano_width: int, density: float, from_deg: float, upsample: float = 2.0
+) -> PolarCaps | None:
     """P_f's caps for a ``pf_width`` px P_f of a ``pano_width`` px panorama at ``density`` (1 or
     from_deg >= 90: none): P_f keeps its rows up to ``from_deg``, the caps take over from the first row
     of a grid min(upsample x pano_width, density x pf_width) px wide that reaches past P_f's last
@@ -83,10 +90,10 @@ def polar_caps(pf_width: int, pano_width: int, density: float, from_deg: float,
     width = max(pf_width, min(int(upsample * pano_width), int(math.ceil(density * pf_width))))
     width -= width % 2
     lat = row_latitudes(pf_width // 2).abs()
-    last = float(lat[lat <= math.radians(from_deg)].max())                  # P_f's last row centre
+    last = float(lat[lat <= math.radians(from_deg)].max())  # P_f's last row centre
     step, cap_step = math.pi / (pf_width // 2), math.pi / (width // 2)
     cap = row_latitudes(width // 2).abs()
-    first = float(cap[cap > last + step / 2 - cap_step / 2].min())         # the caps' first row centre
+    first = float(cap[cap > last + step / 2 - cap_step / 2].min())  # the caps' first row centre
     return PolarCaps(math.degrees(0.5 * (last + first)), width, float(density * pf_width))
 
 
@@ -98,7 +105,7 @@ def called_for(caps: PolarCaps, cap_rgb: torch.Tensor, pf_width: int, ratio: flo
     {"north", "south", "sides"}: the three means)."""
     lat = row_latitudes(cap_rgb.shape[0])
     edge = math.radians(caps.split_deg)
-    pick = (lat.abs() > edge) | (torch.arange(len(lat)) % 4 == 0)     # the caps' rows, every 4th between
+    pick = (lat.abs() > edge) | (torch.arange(len(lat)) % 4 == 0)  # the caps' rows, every 4th between
     lat = lat[pick]
     loss = ring_detail(cap_rgb[pick], torch.clamp(torch.round(pf_width * torch.cos(lat)), 1, cap_rgb.shape[1]))
     weight = torch.cos(lat)
@@ -117,10 +124,10 @@ def ring_detail(rgb: torch.Tensor, counts: torch.Tensor) -> torch.Tensor:
     from each row of rgb [H, W, C]: the row thinned to counts [H] points (``ring_boxes``) and
     interpolated back linearly along the ring, against the row itself."""
     H, W, _ = rgb.shape
-    n = counts.long().to(rgb.device)                                                   # [H]
-    _, _, points = ring_boxes(rgb.to(torch.float64), n)                                # [N, C]
+    n = counts.long().to(rgb.device)  # [H]
+    _, _, points = ring_boxes(rgb.to(torch.float64), n)  # [N, C]
     first = torch.cumsum(n, 0) - n
-    t = (torch.arange(W, dtype=torch.float64, device=rgb.device) + 0.5) * (n[:, None] / W) - 0.5   # [H, W]
+    t = (torch.arange(W, dtype=torch.float64, device=rgb.device) + 0.5) * (n[:, None] / W) - 0.5  # [H, W]
     k0 = torch.floor(t).long()
     f = (t - k0)[..., None]
     a = points[first[:, None] + torch.remainder(k0, n[:, None])]
@@ -133,18 +140,18 @@ def ring_boxes(rgb: torch.Tensor, counts: torch.Tensor) -> tuple[torch.Tensor, t
     interval [N], its centre [N] (pixels, float64) and the exact box average of the row over it [N, C]
     (rgb's dtype; the row taken as constant over each pixel), rows top to bottom."""
     H, W = rgb.shape[:2]
-    row = torch.repeat_interleave(torch.arange(H, device=rgb.device), counts)          # [N]
+    row = torch.repeat_interleave(torch.arange(H, device=rgb.device), counts)  # [N]
     first = torch.cumsum(counts, 0) - counts
-    j = torch.arange(int(counts.sum()), device=rgb.device) - first[row]                # index within the row
+    j = torch.arange(int(counts.sum()), device=rgb.device) - first[row]  # index within the row
     n = counts[row].to(torch.float64)
-    u0, u1 = j * (W / n), (j + 1) * (W / n)                                            # [N] interval, pixels
+    u0, u1 = j * (W / n), (j + 1) * (W / n)  # [N] interval, pixels
     prefix = torch.cat([torch.zeros_like(rgb[:, :1]), torch.cumsum(rgb.to(torch.float64), 1)], 1)  # [H, W + 1, C]
 
-    def integral(u: torch.Tensor) -> torch.Tensor:                                     # row sum over [0, u)
+    def integral(u: torch.Tensor) -> torch.Tensor:  # row sum over [0, u)
         k = torch.clamp(torch.floor(u).long(), 0, W - 1)
         return prefix[row, k] + (u - k)[:, None] * rgb[row, k].to(torch.float64)
 
-    colour = ((integral(u1) - integral(u0)) / (u1 - u0)[:, None]).to(rgb.dtype)      # [N, C]
+    colour = ((integral(u1) - integral(u0)) / (u1 - u0)[:, None]).to(rgb.dtype)  # [N, C]
     return row, 0.5 * (u0 + u1), colour
 
 
@@ -158,9 +165,9 @@ def area_counts(height: int, width: int) -> torch.Tensor:
     return torch.clamp(torch.round(width * torch.cos(row_latitudes(height))), min=1).long()
 
 
-def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, counts: torch.Tensor | None = None,
-                rows: torch.Tensor | None = None
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+def area_sample(
+    rgb: torch.Tensor, radial_depth: torch.Tensor, counts: torch.Tensor | None = None, rows: torch.Tensor | None = None
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Area sampling of an equirect RGB-D image: rgb [H, W, C], radial_depth [Hd, Wd] (metres, any
     size; usually H x W) -> directions [N, 3] (unit, world), rgb [N, C] (box average over each point's
     longitude interval), depth [N] (the depth pixel under the point's centre; not filtered here) and
@@ -169,10 +176,10 @@ def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, counts: torch.Ten
     points per row (default ``area_counts``); ``rows`` [H] bool: the rows to sample (default all)."""
     H, W = rgb.shape[:2]
     Hd, Wd = radial_depth.shape
-    counts = (area_counts(H, W) if counts is None else counts).to(rgb.device)          # [H]
+    counts = (area_counts(H, W) if counts is None else counts).to(rgb.device)  # [H]
     if rows is not None:
         counts = torch.where(rows.to(rgb.device), counts, torch.zeros_like(counts))
-    row, centre, colour = ring_boxes(rgb, counts)                                      # [N], [N], [N, C]
+    row, centre, colour = ring_boxes(rgb, counts)  # [N], [N], [N, C]
     lat = row_latitudes(H).to(rgb.device)[row]
     drow = row if Hd == H else torch.floor((row + 0.5) * (Hd / H)).long()
     dcol = torch.floor(centre if Wd == W else centre * (Wd / W)).long()
@@ -182,9 +189,9 @@ def area_sample(rgb: torch.Tensor, radial_depth: torch.Tensor, counts: torch.Ten
     return dirs, colour, depth, pixel
 
 
-def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, caps: PolarCaps | None = None,
-                            cap_rgb: torch.Tensor | None = None
-                            ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def equirect_to_area_points(
+    rgb: torch.Tensor, radial_depth: torch.Tensor, caps: PolarCaps | None = None, cap_rgb: torch.Tensor | None = None
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``equirect_to_points`` sampled by area: xyz [N, 3] (world, depth's dtype), rgb [N, C] and the
     depth pixel [N] (row-major index into radial_depth) of the area samples with finite depth > 0
     (module docstring). rgb [H, W, C] and radial_depth [H, W] are
@@ -198,19 +205,28 @@ def equirect_to_area_points(rgb: torch.Tensor, radial_depth: torch.Tensor, caps:
         lat, cap_lat = row_latitudes(rgb.shape[0]), row_latitudes(cap_rgb.shape[0])
         ring = torch.clamp(torch.round(caps.ring_points * torch.cos(cap_lat)), 1, caps.width).long()
         cap_rows = caps.holds(cap_lat)
-        parts = [area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat > 0)),
-                 area_sample(rgb, radial_depth, rows=~caps.holds(lat)),
-                 area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat < 0))]
+        parts = [
+            area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat > 0)),
+            area_sample(rgb, radial_depth, rows=~caps.holds(lat)),
+            area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat < 0)),
+        ]
     dirs, colour, depth, pixel = (torch.cat(x) for x in zip(*parts))
     valid = torch.isfinite(depth) & (depth > 0)
     return dirs[valid] * depth[valid][:, None], colour[valid], pixel[valid]
 
 
-def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.6, thickness: float = 0.1,
-                        caps: PolarCaps | None = None, layer_points: int = 0,
-                        layer_spacing_rad: float | torch.Tensor = 0.0,
-                        low_pass_rad2: float = 0.0, normals: torch.Tensor | None = None,
-                        max_stretch: float = 6.0) -> tuple[torch.Tensor, torch.Tensor]:
+def footprint_gaussians(
+    xyz: torch.Tensor,
+    spacing_rad: float,
+    width: float = 0.6,
+    thickness: float = 0.1,
+    caps: PolarCaps | None = None,
+    layer_points: int = 0,
+    layer_spacing_rad: float | torch.Tensor = 0.0,
+    low_pass_rad2: float = 0.0,
+    normals: torch.Tensor | None = None,
+    max_stretch: float = 6.0,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Scales [N, 3] (metres) and quaternions [N, 4] (w, x, y, z) of Gaussians at points xyz [N, 3]
     sampled from the panorama centre (the origin) with angular spacing ``spacing_rad``: standard
     deviation ``width`` x r spacing along the tangent axes, ``thickness`` x r spacing along the ray
@@ -230,7 +246,7 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
     instead of facing the centre: the footprint seen from the centre is projected along the ray onto
     the plane of the normal (``surface_footprint``), so a surface seen at incidence a gets discs
     1 / cos(a) longer down its slope (at most ``max_stretch``) and neighbours overlap from any eye."""
-    r = torch.linalg.vector_norm(xyz, dim=-1).clamp_min(1e-9)                   # [N]
+    r = torch.linalg.vector_norm(xyz, dim=-1).clamp_min(1e-9)  # [N]
     d = xyz / r[:, None]
     layer = torch.arange(len(r), device=r.device) >= len(r) - layer_points
     tail = torch.as_tensor(layer_spacing_rad, dtype=r.dtype, device=r.device).expand(layer_points)
@@ -243,26 +259,33 @@ def footprint_gaussians(xyz: torch.Tensor, spacing_rad: float, width: float = 0.
         across = torch.where(in_cap, caps.row_rad, across)
         along = torch.where(in_cap, caps.ring_rad(lat).to(r.dtype), across)
 
-    def tangent(spacing: torch.Tensor) -> torch.Tensor:                      # [N] std at unit distance
+    def tangent(spacing: torch.Tensor) -> torch.Tensor:  # [N] std at unit distance
         nominal = (width * spacing) ** 2
         return torch.sqrt(torch.clamp(nominal - low_pass_rad2, min=0.25 * nominal))
 
     if normals is not None:
-        return surface_footprint(d, normals.to(d), r * tangent(along), r * tangent(across), thickness * r * across,
-                                 max_stretch)
+        return surface_footprint(
+            d, normals.to(d), r * tangent(along), r * tangent(across), thickness * r * across, max_stretch
+        )
     scales = torch.stack([r * tangent(along), r * tangent(across), thickness * r * across], -1)
     # the shortest rotation taking +z to d: q = (1 + d_z, -d_y, d_x, 0), normalised; d = -z: 180 deg about x
     q = torch.stack([1 + d[:, 2], -d[:, 1], d[:, 0], torch.zeros_like(r)], -1)
     flip = (1 + d[:, 2]) < 1e-9
     q = torch.where(flip[:, None], q.new_tensor([0.0, 1.0, 0.0, 0.0]), q)
     q = q / torch.linalg.vector_norm(q, dim=-1, keepdim=True)
-    if bool(in_cap.any()):     # turn the ellipse about its normal so that local x points east
+    if bool(in_cap.any()):  # turn the ellipse about its normal so that local x points east
         q[in_cap] = _turn_east(q[in_cap], d[in_cap])
     return scales, q
 
 
-def surface_footprint(rays: torch.Tensor, normals: torch.Tensor, east_std: torch.Tensor, north_std: torch.Tensor,
-                      thickness: torch.Tensor, max_stretch: float = 6.0) -> tuple[torch.Tensor, torch.Tensor]:
+def surface_footprint(
+    rays: torch.Tensor,
+    normals: torch.Tensor,
+    east_std: torch.Tensor,
+    north_std: torch.Tensor,
+    thickness: torch.Tensor,
+    max_stretch: float = 6.0,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Scales [N, 3] and quaternions [N, 4] (w, x, y, z) of discs lying on their surface: the footprint
     seen along rays [N, 3] (unit) as an ellipse across the ray, standard deviations east_std [N] (along
     growing longitude) and north_std [N] (metres), projected along the ray onto the plane of normals
@@ -270,31 +293,31 @@ def surface_footprint(rays: torch.Tensor, normals: torch.Tensor, east_std: torch
     ray's own projection) grows by 1 / |cos(incidence)|, at most ``max_stretch``. thickness [N]
     (metres) is the standard deviation along the normal (local z)."""
     east = torch.stack([rays[:, 2], torch.zeros_like(rays[:, 0]), -rays[:, 0]], -1)
-    polar = torch.linalg.vector_norm(east, dim=-1, keepdim=True) < 1e-9                # straight up / down
+    polar = torch.linalg.vector_norm(east, dim=-1, keepdim=True) < 1e-9  # straight up / down
     east = torch.where(polar, east.new_tensor([1.0, 0.0, 0.0]), east)
     east = east / torch.linalg.vector_norm(east, dim=-1, keepdim=True)
-    north = torch.cross(rays, east, dim=-1)                                             # [N, 3], unit
+    north = torch.cross(rays, east, dim=-1)  # [N, 3], unit
     normals = normals / torch.linalg.vector_norm(normals, dim=-1, keepdim=True)
-    cos = (normals * rays).sum(-1, keepdim=True)                                        # [N, 1]
-    facing = cos.abs() > 1 - 1e-9                                                       # no slope to speak of
+    cos = (normals * rays).sum(-1, keepdim=True)  # [N, 1]
+    facing = cos.abs() > 1 - 1e-9  # no slope to speak of
     slope = torch.where(facing, east, rays)
-    slope = slope - normals * (normals * slope).sum(-1, keepdim=True)                   # the ray on the plane
+    slope = slope - normals * (normals * slope).sum(-1, keepdim=True)  # the ray on the plane
     slope = slope / torch.linalg.vector_norm(slope, dim=-1, keepdim=True).clamp_min(1e-30)
-    across = torch.cross(normals, slope, dim=-1)                                        # in the plane and across the ray
-    down = torch.cross(rays, across, dim=-1)                                            # across the ray, onto `slope`
-    stretch = 1.0 / cos.abs().clamp_min(1.0 / max_stretch)                              # [N, 1]
+    across = torch.cross(normals, slope, dim=-1)  # in the plane and across the ray
+    down = torch.cross(rays, across, dim=-1)  # across the ray, onto `slope`
+    stretch = 1.0 / cos.abs().clamp_min(1.0 / max_stretch)  # [N, 1]
 
-    def onto_plane(v: torch.Tensor) -> torch.Tensor:                                   # [N, 3] -> [N, 2] in (across, slope)
+    def onto_plane(v: torch.Tensor) -> torch.Tensor:  # [N, 3] -> [N, 2] in (across, slope)
         return torch.cat([(v * across).sum(-1, keepdim=True), (v * down).sum(-1, keepdim=True) * stretch], -1)
 
-    A, B = onto_plane(east) * east_std[:, None], onto_plane(north) * north_std[:, None]   # [N, 2]
-    c00 = A[:, 0] ** 2 + B[:, 0] ** 2                                                    # the 2x2 covariance
+    A, B = onto_plane(east) * east_std[:, None], onto_plane(north) * north_std[:, None]  # [N, 2]
+    c00 = A[:, 0] ** 2 + B[:, 0] ** 2  # the 2x2 covariance
     c01 = A[:, 0] * A[:, 1] + B[:, 0] * B[:, 1]
     c11 = A[:, 1] ** 2 + B[:, 1] ** 2
     phi = 0.5 * torch.atan2(2 * c01, c00 - c11)
-    half, mean = torch.sqrt((0.5 * (c00 - c11)) ** 2 + c01 ** 2), 0.5 * (c00 + c11)
+    half, mean = torch.sqrt((0.5 * (c00 - c11)) ** 2 + c01**2), 0.5 * (c00 + c11)
     e1 = torch.cos(phi)[:, None] * across + torch.sin(phi)[:, None] * slope
-    R = torch.stack([e1, torch.cross(normals, e1, dim=-1), normals], -1)               # columns: local x, y, z
+    R = torch.stack([e1, torch.cross(normals, e1, dim=-1), normals], -1)  # columns: local x, y, z
     scales = torch.stack([torch.sqrt(mean + half), torch.sqrt((mean - half).clamp_min(0) + 1e-30), thickness], -1)
     return scales, rotmat_to_quat(R)
 
@@ -302,10 +325,10 @@ def surface_footprint(rays: torch.Tensor, normals: torch.Tensor, east_std: torch
 def _turn_east(q: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
     """Quaternions q [M, 4] (taking local z to the rays d [M, 3]) composed with the turn about local z
     that takes local x onto east, the direction of growing longitude ((d_z, 0, -d_x), normalised)."""
-    R = quat_to_rotmat(q)                                                       # [M, 3, 3]
+    R = quat_to_rotmat(q)  # [M, 3, 3]
     east = torch.stack([d[:, 2], torch.zeros_like(d[:, 0]), -d[:, 0]], -1)
     east = east / torch.linalg.vector_norm(east, dim=-1, keepdim=True).clamp_min(1e-12)
-    psi = torch.atan2((east * R[:, :, 1]).sum(-1), (east * R[:, :, 0]).sum(-1))   # [M]
+    psi = torch.atan2((east * R[:, :, 1]).sum(-1), (east * R[:, :, 0]).sum(-1))  # [M]
     c, s = torch.cos(psi / 2), torch.sin(psi / 2)
     w, x, y, z = q.unbind(-1)
     # q (x) (c, 0, 0, s): the Hamilton product with a turn about local z

@@ -5,6 +5,7 @@ cx = W/2, cy = H/2). A viewmat is [..., 4, 4] world-to-camera, OpenCV axes (+x r
 +z forward), as in gsplat: x_cam = R @ x_world + t with R = viewmat[:3, :3], t = viewmat[:3, 3].
 Quaternions are (w, x, y, z). docs/conventions.md has the full list.
 """
+
 from __future__ import annotations
 
 import math
@@ -98,13 +99,15 @@ def invert_viewmat(viewmat: torch.Tensor) -> torch.Tensor:
 def pixel_grid(height: int, width: int, device=None, dtype=None) -> torch.Tensor:
     """Pixel-centre coordinates [H, W, 2] as (x, y) = (col + 0.5, row + 0.5)."""
     dtype = dtype or torch.get_default_dtype()
-    y, x = torch.meshgrid(torch.arange(height, device=device, dtype=dtype) + 0.5,
-                          torch.arange(width, device=device, dtype=dtype) + 0.5, indexing="ij")
+    y, x = torch.meshgrid(
+        torch.arange(height, device=device, dtype=dtype) + 0.5,
+        torch.arange(width, device=device, dtype=dtype) + 0.5,
+        indexing="ij",
+    )
     return torch.stack([x, y], dim=-1)
 
 
-def pinhole_rays(K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int
-                 ) -> tuple[torch.Tensor, torch.Tensor]:
+def pinhole_rays(K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
     """World-frame rays of every pixel centre: origins [..., H, W, 3], unit dirs [..., H, W, 3].
 
     K [..., 3, 3], viewmat [..., 4, 4] (leading dims broadcast)."""
@@ -124,8 +127,9 @@ def pinhole_rays(K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int
     return origins, dirs
 
 
-def project_points(points: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, eps: float = 1e-9
-                   ) -> tuple[torch.Tensor, torch.Tensor]:
+def project_points(
+    points: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, eps: float = 1e-9
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Project world points [..., N, 3]: pixel coords uv [..., N, 2] (centres at +0.5) and depth z [..., N].
 
     Points with z <= eps (behind or on the camera plane) get uv computed with z clamped to eps:
@@ -141,15 +145,41 @@ def rotmat_to_quat(R: torch.Tensor) -> torch.Tensor:
     """Rotation matrices [..., 3, 3] -> unit quaternions (w, x, y, z) [...,4] with w >= 0."""
     m = R
     trace = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
-    cands = torch.stack([
-        torch.stack([1 + trace, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1),
-        torch.stack([m[..., 2, 1] - m[..., 1, 2], 1 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2],
-                     m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]], -1),
-        torch.stack([m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0],
-                     1 - m[..., 0, 0] + m[..., 1, 1] - m[..., 2, 2], m[..., 1, 2] + m[..., 2, 1]], -1),
-        torch.stack([m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1],
-                     1 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2]], -1),
-    ], dim=-2)  # [..., 4, 4]: candidate k is 4 * q_k * q (best conditioned where |q_k| is largest)
+    cands = torch.stack(
+        [
+            torch.stack(
+                [1 + trace, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1
+            ),
+            torch.stack(
+                [
+                    m[..., 2, 1] - m[..., 1, 2],
+                    1 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2],
+                    m[..., 0, 1] + m[..., 1, 0],
+                    m[..., 0, 2] + m[..., 2, 0],
+                ],
+                -1,
+            ),
+            torch.stack(
+                [
+                    m[..., 0, 2] - m[..., 2, 0],
+                    m[..., 0, 1] + m[..., 1, 0],
+                    1 - m[..., 0, 0] + m[..., 1, 1] - m[..., 2, 2],
+                    m[..., 1, 2] + m[..., 2, 1],
+                ],
+                -1,
+            ),
+            torch.stack(
+                [
+                    m[..., 1, 0] - m[..., 0, 1],
+                    m[..., 0, 2] + m[..., 2, 0],
+                    m[..., 1, 2] + m[..., 2, 1],
+                    1 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2],
+                ],
+                -1,
+            ),
+        ],
+        dim=-2,
+    )  # [..., 4, 4]: candidate k is 4 * q_k * q (best conditioned where |q_k| is largest)
     diag = torch.stack([trace, m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]], -1)
     best = torch.argmax(diag, dim=-1)  # [...]
     q = torch.gather(cands, -2, best[..., None, None].expand(*best.shape, 1, 4)).squeeze(-2)
@@ -161,8 +191,17 @@ def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
     """Quaternions (w, x, y, z) [..., 4] (normalised here) -> rotation matrices [..., 3, 3]."""
     q = q / torch.linalg.vector_norm(q, dim=-1, keepdim=True)
     w, x, y, z = q.unbind(-1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], -1).reshape(*q.shape[:-1], 3, 3)
+    return torch.stack(
+        [
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
+        ],
+        -1,
+    ).reshape(*q.shape[:-1], 3, 3)

@@ -9,6 +9,7 @@ nerfstudio stores camera-to-world matrices in OpenGL axes (+x right, +y up, +z b
 c2w_gl = inverse(viewmat) @ diag(1, -1, -1, 1). COLMAP's images.txt stores world-to-camera in OpenCV
 axes as a quaternion (w, x, y, z) and a translation.
 """
+
 from __future__ import annotations
 
 import json
@@ -21,8 +22,16 @@ from holoflow.geometry.camera import invert_viewmat, make_viewmat, quat_to_rotma
 _GL = torch.diag(torch.tensor([1.0, -1.0, -1.0, 1.0], dtype=torch.float64))  # OpenCV <-> OpenGL camera axes
 
 
-def cameras_json(K: torch.Tensor, viewmats: torch.Tensor, width: int, height: int, names: list[str],
-                 files: list[str], kinds: list[str] | None = None, bases: list[int] | None = None) -> dict:
+def cameras_json(
+    K: torch.Tensor,
+    viewmats: torch.Tensor,
+    width: int,
+    height: int,
+    names: list[str],
+    files: list[str],
+    kinds: list[str] | None = None,
+    bases: list[int] | None = None,
+) -> dict:
     """A cameras.json dict from a shared K [3, 3] and viewmats [M, 4, 4] (world-to-camera)."""
     M = viewmats.shape[0]
     if not len(names) == len(files) == M:
@@ -31,16 +40,26 @@ def cameras_json(K: torch.Tensor, viewmats: torch.Tensor, width: int, height: in
     bases = bases if bases is not None else list(range(M))
     K = K.detach().double().cpu()
     V = viewmats.detach().double().cpu()
-    views = [{"name": names[i], "file": files[i], "viewmat": V[i].tolist(), "kind": kinds[i], "base": int(bases[i])}
-             for i in range(M)]
-    return {"width": int(width), "height": int(height), "fx": float(K[0, 0]), "fy": float(K[1, 1]),
-            "cx": float(K[0, 2]), "cy": float(K[1, 2]), "views": views}
+    views = [
+        {"name": names[i], "file": files[i], "viewmat": V[i].tolist(), "kind": kinds[i], "base": int(bases[i])}
+        for i in range(M)
+    ]
+    return {
+        "width": int(width),
+        "height": int(height),
+        "fx": float(K[0, 0]),
+        "fy": float(K[1, 1]),
+        "cx": float(K[0, 2]),
+        "cy": float(K[1, 2]),
+        "views": views,
+    }
 
 
 def cameras_tensors(cams: dict) -> tuple[torch.Tensor, torch.Tensor]:
     """K [3, 3] and viewmats [M, 4, 4] (float64) of a cameras.json dict."""
-    K = torch.tensor([[cams["fx"], 0.0, cams["cx"]], [0.0, cams["fy"], cams["cy"]], [0.0, 0.0, 1.0]],
-                     dtype=torch.float64)
+    K = torch.tensor(
+        [[cams["fx"], 0.0, cams["cx"]], [0.0, cams["fy"], cams["cy"]], [0.0, 0.0, 1.0]], dtype=torch.float64
+    )
     V = torch.tensor([v["viewmat"] for v in cams["views"]], dtype=torch.float64).reshape(-1, 4, 4)
     return K, V
 
@@ -71,11 +90,30 @@ def write_transforms(path: str | Path, cams: dict) -> None:
     """nerfstudio transforms.json for a cameras.json dict (file paths relative to the json's folder)."""
     _, V = cameras_tensors(cams)
     c2w = invert_viewmat(V) @ _GL  # [M, 4, 4] camera-to-world, OpenGL camera axes
-    frames = [{"file_path": v["file"], "transform_matrix": c2w[i].tolist(), "holoflow_name": v["name"],
-               "holoflow_kind": v.get("kind", "base"), "holoflow_base": int(v.get("base", i))}
-              for i, v in enumerate(cams["views"])]
-    out = {"camera_model": "OPENCV", "fl_x": cams["fx"], "fl_y": cams["fy"], "cx": cams["cx"], "cy": cams["cy"],
-           "w": cams["width"], "h": cams["height"], "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0, "frames": frames}
+    frames = [
+        {
+            "file_path": v["file"],
+            "transform_matrix": c2w[i].tolist(),
+            "holoflow_name": v["name"],
+            "holoflow_kind": v.get("kind", "base"),
+            "holoflow_base": int(v.get("base", i)),
+        }
+        for i, v in enumerate(cams["views"])
+    ]
+    out = {
+        "camera_model": "OPENCV",
+        "fl_x": cams["fx"],
+        "fl_y": cams["fy"],
+        "cx": cams["cx"],
+        "cy": cams["cy"],
+        "w": cams["width"],
+        "h": cams["height"],
+        "k1": 0.0,
+        "k2": 0.0,
+        "p1": 0.0,
+        "p2": 0.0,
+        "frames": frames,
+    }
     Path(path).write_text(json.dumps(out, indent=1) + "\n")
 
 
@@ -85,11 +123,24 @@ def read_transforms(path: str | Path) -> dict:
     views = []
     for i, f in enumerate(t["frames"]):
         c2w = torch.tensor(f["transform_matrix"], dtype=torch.float64) @ _GL
-        views.append({"name": f.get("holoflow_name", Path(f["file_path"]).stem), "file": f["file_path"],
-                      "viewmat": invert_viewmat(c2w).tolist(), "kind": f.get("holoflow_kind", "base"),
-                      "base": int(f.get("holoflow_base", i))})
-    return {"width": int(t["w"]), "height": int(t["h"]), "fx": float(t["fl_x"]), "fy": float(t["fl_y"]),
-            "cx": float(t["cx"]), "cy": float(t["cy"]), "views": views}
+        views.append(
+            {
+                "name": f.get("holoflow_name", Path(f["file_path"]).stem),
+                "file": f["file_path"],
+                "viewmat": invert_viewmat(c2w).tolist(),
+                "kind": f.get("holoflow_kind", "base"),
+                "base": int(f.get("holoflow_base", i)),
+            }
+        )
+    return {
+        "width": int(t["w"]),
+        "height": int(t["h"]),
+        "fx": float(t["fl_x"]),
+        "fy": float(t["fl_y"]),
+        "cx": float(t["cx"]),
+        "cy": float(t["cy"]),
+        "views": views,
+    }
 
 
 def write_colmap(folder: str | Path, cams: dict) -> None:
@@ -102,7 +153,8 @@ def write_colmap(folder: str | Path, cams: dict) -> None:
     t = V[:, :3, 3]
     (folder / "cameras.txt").write_text(
         "# CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[fx, fy, cx, cy]\n"
-        f"1 PINHOLE {cams['width']} {cams['height']} {cams['fx']!r} {cams['fy']!r} {cams['cx']!r} {cams['cy']!r}\n")
+        f"1 PINHOLE {cams['width']} {cams['height']} {cams['fx']!r} {cams['fy']!r} {cams['cx']!r} {cams['cy']!r}\n"
+    )
     lines = ["# IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME", "# POINTS2D[] (none)"]
     for i, v in enumerate(cams["views"]):
         vals = " ".join(repr(float(x)) for x in [*q[i].tolist(), *t[i].tolist()])
@@ -130,6 +182,5 @@ def read_colmap(folder: str | Path) -> dict:
         qt = torch.tensor([float(x) for x in parts[1:8]], dtype=torch.float64)
         V = make_viewmat(quat_to_rotmat(qt[:4]), qt[4:])
         name = " ".join(parts[9:])
-        views.append({"name": Path(name).stem, "file": name, "viewmat": V.tolist(), "kind": "base",
-                      "base": len(views)})
+        views.append({"name": Path(name).stem, "file": name, "viewmat": V.tolist(), "kind": "base", "base": len(views)})
     return {"width": int(w), "height": int(h), "fx": fx, "fy": fy, "cx": cx, "cy": cy, "views": views}

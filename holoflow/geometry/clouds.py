@@ -24,6 +24,7 @@ on its equirect grid:
 Colour is resampled antialiased, depth point-sampled (no invented edge depths). Colours returned are
 8-bit sRGB (the PLY convention, docs/conventions.md).
 """
+
 from __future__ import annotations
 
 import math
@@ -89,38 +90,53 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         counts[name] = int(clouds[name].xyz.shape[0])
         if progress is not None:
             progress(i + 1, 3, "clouds")
-    pf = {"width": pf_width, "sampling": cfg.pf_sampling, "spacing_rad": 2 * math.pi / pf_width,
-          "view_pixel_rad": view_pixel_rad(cfg.view_size, cfg.view_fov_deg)}   # the footprint init's low-pass
+    pf = {
+        "width": pf_width,
+        "sampling": cfg.pf_sampling,
+        "spacing_rad": 2 * math.pi / pf_width,
+        "view_pixel_rad": view_pixel_rad(cfg.view_size, cfg.view_fov_deg),
+    }  # the footprint init's low-pass
     if extra.get("caps") is not None:
         pf["polar_caps"] = extra["caps"].to_json()
-    if counts.get("pf_layer"):     # the last points of pf.ply, on every layer_stride-th row and column
+    if counts.get("pf_layer"):  # the last points of pf.ply, on every layer_stride-th row and column
         pf["layer"] = {"points": counts["pf_layer"], "spacing_rad": 2 * math.pi * cfg.layer_stride / pf_width}
-    if counts.get("pf_dome"):      # after the layer: the sky dome's points
+    if counts.get("pf_dome"):  # after the layer: the sky dome's points
         pf["dome"] = {"points": counts["pf_dome"], "spacing_rad": 2 * math.pi / extra["dome_width"]}
-    meta = dict(pf_width=pf_width, pf_sampling=cfg.pf_sampling, points=counts, polar_caps=pf.get("polar_caps"),
-                polar_detail=extra.get("polar_detail"), sky_fraction=round(sky_fraction, 6),
-                shell_radius=round(shell, 6), grad_threshold=cfg.grad_threshold, depth_size=list(depth.shape))
+    meta = dict(
+        pf_width=pf_width,
+        pf_sampling=cfg.pf_sampling,
+        points=counts,
+        polar_caps=pf.get("polar_caps"),
+        polar_detail=extra.get("polar_detail"),
+        sky_fraction=round(sky_fraction, 6),
+        shell_radius=round(shell, 6),
+        grad_threshold=cfg.grad_threshold,
+        depth_size=list(depth.shape),
+    )
     return Clouds(clouds, pf, meta)
 
 
-def _pf_cloud(srgb: torch.Tensor, col: torch.Tensor, d: torch.Tensor, sky: torch.Tensor, shell: float,
-              cfg: PointCloudParams) -> tuple[Cloud, dict]:
+def _pf_cloud(
+    srgb: torch.Tensor, col: torch.Tensor, d: torch.Tensor, sky: torch.Tensor, shell: float, cfg: PointCloudParams
+) -> tuple[Cloud, dict]:
     """P_f from its grid col [h, w, 3] (sRGB) and d [h, w] (radial m, the sky [h, w] on its shell of
     radius ``shell``), steps 2-6 of the module docstring: (the cloud, {"counts", "caps", "polar_detail",
     "dome_width"})."""
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
     d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise)
-    normals = surface_normals(d, cfg.layer_tol)                                     # [h, w, 3]
+    normals = surface_normals(d, cfg.layer_tol)  # [h, w, 3]
     keep = depth_gradient_mask(d, cfg.grad_threshold, cfg.grad_sides == "one_sided")
     layer = None
-    if cfg.layer_baseline > 0:     # the far side continued under the silhouettes
-        layer = background_layer(col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg,
-                                 cfg.layer_stride, cfg.layer_slope)
+    if cfg.layer_baseline > 0:  # the far side continued under the silhouettes
+        layer = background_layer(
+            col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg, cfg.layer_stride, cfg.layer_slope
+        )
     d = torch.where(keep, d, torch.full_like(d, float("nan")))
     caps, detail = None, None
     if cfg.pf_sampling == "area":
-        caps = polar_caps(col.shape[1], srgb.shape[1], cfg.pf_polar_density, cfg.pf_polar_from_deg,
-                          cfg.pf_polar_upsample)
+        caps = polar_caps(
+            col.shape[1], srgb.shape[1], cfg.pf_polar_density, cfg.pf_polar_from_deg, cfg.pf_polar_upsample
+        )
         cap_rgb = None
         if caps is not None:
             cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)
@@ -132,7 +148,7 @@ def _pf_cloud(srgb: torch.Tensor, col: torch.Tensor, d: torch.Tensor, sky: torch
         xyz, c = equirect_to_points(col, d)
         n = normals[torch.isfinite(d) & (d > 0)]
     counts = {"pf_dropped_fraction": round(float((~keep).double().mean()), 6)}
-    if layer is not None:      # the layer continues a far surface seen head on from the centre: discs face it
+    if layer is not None:  # the layer continues a far surface seen head on from the centre: discs face it
         lxyz, lc = equirect_to_points(layer[1], layer[0])
         ldirs = equirect_directions(*layer[0].shape, dtype=lxyz.dtype)[torch.isfinite(layer[0]) & (layer[0] > 0)]
         xyz, c, n = torch.cat([xyz, lxyz]), torch.cat([c, lc]), torch.cat([n, -ldirs.to(n.dtype)])
@@ -143,8 +159,7 @@ def _pf_cloud(srgb: torch.Tensor, col: torch.Tensor, d: torch.Tensor, sky: torch
         n = torch.cat([n, -dxyz / torch.linalg.vector_norm(dxyz, dim=-1, keepdim=True)])
         xyz, c = torch.cat([xyz, dxyz.to(xyz.dtype)]), torch.cat([c, dc.to(c.dtype)])
         counts["pf_dome"] = int(len(dxyz))
-    return Cloud(xyz, _to_u8(c), n), {"counts": counts, "caps": caps, "polar_detail": detail,
-                                      "dome_width": dome_width}
+    return Cloud(xyz, _to_u8(c), n), {"counts": counts, "caps": caps, "polar_detail": detail, "dome_width": dome_width}
 
 
 def sky_dome(rgb: torch.Tensor, sky: torch.Tensor, radius: float, width: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -153,11 +168,12 @@ def sky_dome(rgb: torch.Tensor, sky: torch.Tensor, radius: float, width: int) ->
     ``width`` x ``width // 2`` grid whose direction the panorama does not see as sky, and their colour
     [M, C]: the sky's own colours spread into the rest (``fill_from``)."""
     h = max(1, width // 2)
-    small = resize_equirect(torch.cat([rgb * sky[..., None], sky[..., None].to(rgb.dtype)], -1).permute(2, 0, 1),
-                            h, width).permute(1, 2, 0)                                 # [h, w, C + 1]
+    small = resize_equirect(
+        torch.cat([rgb * sky[..., None], sky[..., None].to(rgb.dtype)], -1).permute(2, 0, 1), h, width
+    ).permute(1, 2, 0)  # [h, w, C + 1]
     weight = small[..., -1]
     colour = fill_from(small[..., :-1] / weight.clamp_min(1e-12)[..., None], weight > 1e-3)
-    where = weight < 0.999                                                       # not all sky: the dome behind
+    where = weight < 0.999  # not all sky: the dome behind
     dirs = equirect_directions(h, width, dtype=rgb.dtype)
     return dirs[where] * radius, colour[where]
 
@@ -173,13 +189,13 @@ def fill_from(values: torch.Tensor, known: torch.Tensor) -> torch.Tensor:
     while bool((levels[-1][1] == 0).any()) and min(levels[-1][1].shape[:2]) > 1:
         v, w = levels[-1]
         H, W = v.shape[:2]
-        if W % 2:                                                                      # wrap one column in
+        if W % 2:  # wrap one column in
             v, w = torch.cat([v, v[:, :1]], 1), torch.cat([w, w[:, :1]], 1)
         if H % 2:
             v, w = torch.cat([v, v[-1:]], 0), torch.cat([w, w[-1:]], 0)
         levels.append((_sum_2x2(v), _sum_2x2(w)))
     v, w = levels[-1]
-    mean = v.sum((0, 1)) / w.sum((0, 1)).clamp_min(1e-12)                               # what is left: the mean
+    mean = v.sum((0, 1)) / w.sum((0, 1)).clamp_min(1e-12)  # what is left: the mean
     out = torch.where(w > 0, v / w.clamp_min(1e-12), mean)
     for v, w in reversed(levels[:-1]):
         up = out.repeat_interleave(2, 0).repeat_interleave(2, 1)[: v.shape[0], : v.shape[1]]

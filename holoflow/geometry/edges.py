@@ -17,6 +17,7 @@ seen beyond 84 deg (2048 px: 85.6 deg) is stepped.
 
 Conventions: radial depth in metres, finite > 0 (the sky already on its shell; holoflow/geometry/pointcloud.py).
 """
+
 from __future__ import annotations
 
 import torch
@@ -25,14 +26,15 @@ import torch.nn.functional as F
 
 def _window_min_max(d: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Min and max [H, W] of d [H, W] over (2 radius + 1)^2 windows, columns wrapping, rows clamped."""
-    x = torch.cat([d[:, -radius:], d, d[:, :radius]], 1)[None, None]       # [1, 1, H, W + 2r]
-    x = F.pad(x, (0, 0, radius, radius), mode="replicate")                 # [1, 1, H + 2r, W + 2r]
+    x = torch.cat([d[:, -radius:], d, d[:, :radius]], 1)[None, None]  # [1, 1, H, W + 2r]
+    x = F.pad(x, (0, 0, radius, radius), mode="replicate")  # [1, 1, H + 2r, W + 2r]
     k = 2 * radius + 1
     return -F.max_pool2d(-x, k, 1)[0, 0], F.max_pool2d(x, k, 1)[0, 0]
 
 
-def snap_depth_edges(radial_depth: torch.Tensor, radius: int = 3, ratio: float = 0.25, tol: float = 0.1,
-                     rounds: int = 2) -> torch.Tensor:
+def snap_depth_edges(
+    radial_depth: torch.Tensor, radius: int = 3, ratio: float = 0.25, tol: float = 0.1, rounds: int = 2
+) -> torch.Tensor:
     """The ramps of radial_depth [H, W] (metres, finite > 0) moved onto their near or far side (module
     docstring): [H, W], same dtype. radius (px): half window; ratio: far / near - 1 that makes a
     window an edge; tol: relative distance from an end within which a pixel stays; rounds: passes

@@ -11,6 +11,7 @@ the triangle is pushed outward by ``padding`` units (tan of the angle from the c
 the bounding box of that padded triangle, ``size`` x ``size`` pixels, so fx != fy in general. With
 the default 0.3 a face sees about 99 deg (across) x 88 deg (along the apex axis).
 """
+
 from __future__ import annotations
 
 import math
@@ -49,12 +50,16 @@ def icosahedron(device=None, dtype=None) -> tuple[torch.Tensor, torch.Tensor]:
     verts.append((0.0, 1.0, 0.0))
     up = [1 + i for i in range(5)]
     lo = [6 + i for i in range(5)]
-    faces = ([(0, up[i], up[(i + 1) % 5]) for i in range(5)]
-             + [(up[i], up[(i + 1) % 5], lo[i]) for i in range(5)]
-             + [(lo[i], lo[(i + 1) % 5], up[(i + 1) % 5]) for i in range(5)]
-             + [(11, lo[i], lo[(i + 1) % 5]) for i in range(5)])
-    return (torch.tensor(verts, device=device, dtype=torch.float64).to(dtype),
-            torch.tensor(faces, device=device, dtype=torch.long))
+    faces = (
+        [(0, up[i], up[(i + 1) % 5]) for i in range(5)]
+        + [(up[i], up[(i + 1) % 5], lo[i]) for i in range(5)]
+        + [(lo[i], lo[(i + 1) % 5], up[(i + 1) % 5]) for i in range(5)]
+        + [(11, lo[i], lo[(i + 1) % 5]) for i in range(5)]
+    )
+    return (
+        torch.tensor(verts, device=device, dtype=torch.float64).to(dtype),
+        torch.tensor(faces, device=device, dtype=torch.long),
+    )
 
 
 def tangent_faces(padding: float = 0.3, size: int = 256, device=None, dtype=None) -> TangentFaces:
@@ -74,8 +79,14 @@ def tangent_faces(padding: float = 0.3, size: int = 256, device=None, dtype=None
     lo, hi = padded.amin(1), padded.amax(1)  # [20, 2]
     fx, fy = size / (hi[:, 0] - lo[:, 0]), size / (hi[:, 1] - lo[:, 1])
     K = intrinsics(fx, fy, -lo[:, 0] * fx, -lo[:, 1] * fy, device=device, dtype=torch.float64)
-    return TangentFaces(K=K.to(dtype), viewmat=viewmat.to(dtype), centers=centers.to(dtype),
-                        vertices=corners.to(dtype), size=size, padding=padding)
+    return TangentFaces(
+        K=K.to(dtype),
+        viewmat=viewmat.to(dtype),
+        centers=centers.to(dtype),
+        vertices=corners.to(dtype),
+        size=size,
+        padding=padding,
+    )
 
 
 def face_of_direction(dirs: torch.Tensor, centers: torch.Tensor | None = None) -> torch.Tensor:

@@ -31,6 +31,7 @@ continues under them too.
 
 Conventions: radial depth in metres, equirect pixel centres (holoflow/geometry/sphere.py, docs/conventions.md).
 """
+
 from __future__ import annotations
 
 import math
@@ -39,12 +40,19 @@ import numpy as np
 import torch
 from numba import njit
 
-MAX_DEPTH_RATIO = 1.5     # extrapolated layer depth stays within this factor of the edge's own depth
+MAX_DEPTH_RATIO = 1.5  # extrapolated layer depth stays within this factor of the edge's own depth
 
 
-def background_layer(rgb: torch.Tensor, radial_depth: torch.Tensor, source: torch.Tensor, baseline: float,
-                     tol: float = 0.1, max_deg: float = 30.0, stride: int = 1, slope: bool = False
-                     ) -> tuple[torch.Tensor, torch.Tensor]:
+def background_layer(
+    rgb: torch.Tensor,
+    radial_depth: torch.Tensor,
+    source: torch.Tensor,
+    baseline: float,
+    tol: float = 0.1,
+    max_deg: float = 30.0,
+    stride: int = 1,
+    slope: bool = False,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The far surfaces continued under the near silhouettes (module docstring).
 
     rgb [H, W, C] (any colour space: it is averaged), radial_depth [H, W] metres (finite > 0 wherever
@@ -62,21 +70,35 @@ def background_layer(rgb: torch.Tensor, radial_depth: torch.Tensor, source: torc
     src = source.detach().cpu().numpy().astype(np.bool_) & np.isfinite(d) & (d > 0)
     raw = np.where(np.isfinite(d) & (d > 0), d, np.inf)
     pad = np.pad(raw, ((1, 1), (0, 0)), constant_values=np.inf)
-    nbr = np.min([np.roll(pad, s, 1)[1 + dy:H + 1 + dy] for dy in (-1, 0, 1) for s in (-1, 0, 1)], axis=0)
-    near = np.where(src, d, nbr)              # non-sources: the nearest depth around them
+    nbr = np.min([np.roll(pad, s, 1)[1 + dy : H + 1 + dy] for dy in (-1, 0, 1) for s in (-1, 0, 1)], axis=0)
+    near = np.where(src, d, nbr)  # non-sources: the nearest depth around them
     col = np.ascontiguousarray(rgb.detach().cpu().double().numpy().reshape(H, W, -1))
     lat = (0.5 - (np.arange(H) + 0.5) / H) * math.pi
     out_d = np.full((H, W), np.inf)
     out_c = np.zeros_like(col)
-    _grow(d, src, near, col, np.cos(lat), 2 * math.pi / W, float(baseline), float(tol),
-          math.radians(max_deg), out_d, out_c, slope)
+    _grow(
+        d,
+        src,
+        near,
+        col,
+        np.cos(lat),
+        2 * math.pi / W,
+        float(baseline),
+        float(tol),
+        math.radians(max_deg),
+        out_d,
+        out_c,
+        slope,
+    )
     if stride > 1:
         sparse = np.ones((H, W), bool)
         sparse[::stride, ::stride] = False
         out_d[sparse] = np.inf
         out_c[sparse] = 0.0
-    return (torch.from_numpy(out_d).to(radial_depth.dtype).to(radial_depth.device),
-            torch.from_numpy(out_c).to(rgb.dtype).to(rgb.device))
+    return (
+        torch.from_numpy(out_d).to(radial_depth.dtype).to(radial_depth.device),
+        torch.from_numpy(out_c).to(rgb.dtype).to(rgb.device),
+    )
 
 
 @njit(cache=True)
@@ -85,13 +107,13 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c,
     out_c [H, W, C] in place."""
     H, W = d.shape
     C = col.shape[2]
-    inv0 = np.zeros((H, W))          # inverse depth of the edge pixel a value came from
-    slope = np.zeros((H, W))         # its inverse-depth change per pixel step
-    steps = np.zeros((H, W))         # pixel steps from the edge
-    ang = np.zeros((H, W))           # angle from the edge (rad)
-    rnd = np.full((H, W), -1, np.int64)      # round the pixel got its layer value
-    stamp = np.full((H, W), -1, np.int64)    # last round the pixel was a candidate
-    front = np.empty(H * W, np.int64)        # pixels that got a value in the previous round
+    inv0 = np.zeros((H, W))  # inverse depth of the edge pixel a value came from
+    slope = np.zeros((H, W))  # its inverse-depth change per pixel step
+    steps = np.zeros((H, W))  # pixel steps from the edge
+    ang = np.zeros((H, W))  # angle from the edge (rad)
+    rnd = np.full((H, W), -1, np.int64)  # round the pixel got its layer value
+    stamp = np.full((H, W), -1, np.int64)  # last round the pixel was a candidate
+    front = np.empty(H * W, np.int64)  # pixels that got a value in the previous round
     nf = 0
     cand = np.empty(H * W, np.int64)
     best_i = np.empty(8)
@@ -103,7 +125,7 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c,
     r = 0
     while True:
         r += 1
-        nc = 0                                          # candidates: neighbours of the front
+        nc = 0  # candidates: neighbours of the front
         if r == 1:
             for p in range(H * W):
                 cand[nc] = p
@@ -135,8 +157,8 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c,
                         if not src[qy, qx]:
                             continue
                         i0 = 1.0 / d[qy, qx]
-                        s = 0.0                     # continue the far surface's slope when it is smooth
-                        ry, rx = qy + dy, (qx + dx) % W          # the next pixel beyond q, away from p
+                        s = 0.0  # continue the far surface's slope when it is smooth
+                        ry, rx = qy + dy, (qx + dx) % W  # the next pixel beyond q, away from p
                         if use_slope and 0 <= ry < H and src[ry, rx] and abs(d[ry, rx] / d[qy, qx] - 1.0) < tol:
                             s = i0 - 1.0 / d[ry, rx]
                         k = 1.0
@@ -148,9 +170,9 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c,
                     a = a0 + step * math.sqrt((dx * coslat[py]) ** 2 + dy * dy)
                     ib = min(max(i0 + k * s, i0 / MAX_DEPTH_RATIO), i0 * MAX_DEPTH_RATIO)
                     inv_near = 1.0 / near[py, px]
-                    if ib > (1.0 - tol) * inv_near:                  # not behind this pixel's surface
+                    if ib > (1.0 - tol) * inv_near:  # not behind this pixel's surface
                         continue
-                    if a > max_ang or a > baseline * (inv_near - ib) + step:    # beyond what a move uncovers
+                    if a > max_ang or a > baseline * (inv_near - ib) + step:  # beyond what a move uncovers
                         continue
                     best_i[n_ok], best_0[n_ok], best_s[n_ok], best_k[n_ok], best_a[n_ok] = ib, i0, s, k, a
                     best_q[n_ok] = qy * W + qx
@@ -165,8 +187,8 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c,
             for ch in range(C):
                 out_c[py, px, ch] = 0.0
             for t in range(n_ok):
-                if best_i[t] * (1.0 - tol) <= far:             # within tol of the farthest
-                    if j < 0 or best_a[t] < best_a[j]:        # the straightest path carries on
+                if best_i[t] * (1.0 - tol) <= far:  # within tol of the farthest
+                    if j < 0 or best_a[t] < best_a[j]:  # the straightest path carries on
                         j = t
                     qy, qx = best_q[t] // W, best_q[t] % W
                     for ch in range(C):
@@ -177,7 +199,7 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c,
             inv0[py, px], slope[py, px], steps[py, px], ang[py, px] = best_0[j], best_s[j], best_k[j], best_a[j]
             out_d[py, px] = 1.0 / best_i[j]
             rnd[py, px] = r
-            cand[nf_new] = cand[c]          # reuse cand's slots already read as the next front
+            cand[nf_new] = cand[c]  # reuse cand's slots already read as the next front
             nf_new += 1
         if nf_new == 0:
             break
@@ -189,5 +211,5 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, out_d, out_c,
 def compile_ahead() -> None:
     """Compile ``_grow`` (or load it from numba's disk cache): ``background_layer`` passes float64
     arrays whatever its inputs' dtype. holoflow/flow/executors/ahead.py."""
-    d = torch.tensor([[1.0, 1.0, 2.0, 2.0], [1.0, 1.0, 2.0, 2.0]])        # [2, 4] a near and a far half
+    d = torch.tensor([[1.0, 1.0, 2.0, 2.0], [1.0, 1.0, 2.0, 2.0]])  # [2, 4] a near and a far half
     background_layer(torch.zeros(2, 4, 3), d, torch.ones(2, 4, dtype=torch.bool), 0.5)

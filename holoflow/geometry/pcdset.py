@@ -15,6 +15,7 @@ not be inpainted.
 Tensors: points [N, 3] float64 metres (world = the panorama's OpenCV frame), colours [N, 3] linear,
 K [3, 3], viewmats [V, 4, 4] world-to-camera; images [H, W, 3] linear, masks [H, W] in {0, 1}.
 """
+
 from __future__ import annotations
 
 import math
@@ -48,19 +49,26 @@ class PcdSet:
 
     def radii(self, viewmat: torch.Tensor, points: torch.Tensor):
         """z-buffer splat radius in px: the fixed one, or each point's footprint [P] at ``viewmat``."""
-        return self.splat_radius if self.splat_radius > 0 else footprint_radius(points, viewmat, self.K,
-                                                                                 self.spacing)
+        return self.splat_radius if self.splat_radius > 0 else footprint_radius(points, viewmat, self.K, self.spacing)
 
     def view(self, j: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Supplementary view ``j``: (image [H, W, 3] linear, hit [H, W]: a non-edge point landed (the loss
         mask A), seen [H, W]: any point of P_s landed)."""
         V = self.viewmats[j]
-        img, hit, _ = project_points_zbuffer(self.points, self.linear, self.K, V, self.height, self.width,
-                                             self.radii(V, self.points))
+        img, hit, _ = project_points_zbuffer(
+            self.points, self.linear, self.K, V, self.height, self.width, self.radii(V, self.points)
+        )
         seen = hit
         if len(self.edge_points):
-            _, edge_hit, _ = project_points_zbuffer(self.edge_points, self.edge_points[:, :0], self.K, V,
-                                                    self.height, self.width, self.radii(V, self.edge_points))
+            _, edge_hit, _ = project_points_zbuffer(
+                self.edge_points,
+                self.edge_points[:, :0],
+                self.K,
+                V,
+                self.height,
+                self.width,
+                self.radii(V, self.edge_points),
+            )
             seen = torch.maximum(hit, edge_hit)
         return img, hit, seen
 
@@ -77,12 +85,13 @@ def split_edge_points(points: torch.Tensor, edge_threshold: float) -> torch.Tens
     return (torch.nan_to_num(grad, nan=float("inf")) <= edge_threshold).reshape(-1)
 
 
-def median_view_depths(points: torch.Tensor, K: torch.Tensor, viewmats: torch.Tensor, width: int, height: int,
-                       radii) -> list[float]:
+def median_view_depths(
+    points: torch.Tensor, K: torch.Tensor, viewmats: torch.Tensor, width: int, height: int, radii
+) -> list[float]:
     """Per base view [M], the median z (m) of the geometry (not the sky shell) its z-buffer keeps;
     the median radius of the geometry for a view that sees none. ``radii(viewmat, points)``."""
     solid = solid_points_mask(points)
-    geo = points[solid]                                                  # [G, 3]
+    geo = points[solid]  # [G, 3]
     out = []
     for V in viewmats:
         _, hit, z = project_points_zbuffer(geo, geo[:, :0], K, V, height, width, radii(V, geo))
@@ -91,17 +100,25 @@ def median_view_depths(points: torch.Tensor, K: torch.Tensor, viewmats: torch.Te
     return out
 
 
-def pcd_set(points: torch.Tensor, linear: torch.Tensor, K: torch.Tensor, base_viewmats: torch.Tensor,
-            width: int, height: int, cfg: PcdSetParams) -> PcdSet:
+def pcd_set(
+    points: torch.Tensor,
+    linear: torch.Tensor,
+    K: torch.Tensor,
+    base_viewmats: torch.Tensor,
+    width: int,
+    height: int,
+    cfg: PcdSetParams,
+) -> PcdSet:
     """The PCD set of P_s (``points`` [N, 3], ``linear`` colours [N, 3]) around ``base_viewmats`` [M, 4, 4]
     (intrinsics ``K``, ``width`` x ``height`` px), with pcd_set's ``cfg``; see the module docstring."""
     if len(points) == 0:
         raise ValueError("ps.ply holds no points")
     keep = split_edge_points(points, cfg.edge_threshold)
-    spacing = 2.0 * math.pi / math.sqrt(2.0 * len(points))                # P_s's angular step, radians
-    pcd = PcdSet(points[keep], linear[keep], points[~keep], base_viewmats, [], K, width, height, spacing,
-                 cfg.splat_radius)
+    spacing = 2.0 * math.pi / math.sqrt(2.0 * len(points))  # P_s's angular step, radians
+    pcd = PcdSet(
+        points[keep], linear[keep], points[~keep], base_viewmats, [], K, width, height, spacing, cfg.splat_radius
+    )
     pcd.medians = median_view_depths(pcd.points, K, base_viewmats, width, height, pcd.radii)
     medians = torch.tensor(pcd.medians, dtype=torch.float64, device=points.device)
-    pcd.viewmats = supplementary_rig(base_viewmats, medians, cfg.offset, cfg.angle_deg)   # [4 M, 4, 4]
+    pcd.viewmats = supplementary_rig(base_viewmats, medians, cfg.offset, cfg.angle_deg)  # [4 M, 4, 4]
     return pcd

@@ -18,6 +18,7 @@ deg), while a depth edge gives a jump that stays a jump at any resolution: g > 0
 beside a discontinuity where depth changes by more than ~1.8x across two pixels (the mixed-depth
 pixels the paper wants gone), independently of the scene's scale.
 """
+
 from __future__ import annotations
 
 import torch
@@ -62,9 +63,16 @@ def depth_gradient_mask(radial_depth: torch.Tensor, threshold: float = 0.4, one_
     return torch.nan_to_num(g, nan=float("inf")) <= threshold
 
 
-def project_points_zbuffer(xyz: torch.Tensor, rgb: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor,
-                           height: int, width: int, radius: int | torch.Tensor = 1, near: float = 1e-6
-                           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def project_points_zbuffer(
+    xyz: torch.Tensor,
+    rgb: torch.Tensor,
+    K: torch.Tensor,
+    viewmat: torch.Tensor,
+    height: int,
+    width: int,
+    radius: int | torch.Tensor = 1,
+    near: float = 1e-6,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Render points [N, 3] with colours [N, C] into a pinhole camera with a z-buffer.
 
     Each point in front of the camera (z > near) covers the (2 radius - 1)^2 pixels around the pixel
@@ -87,8 +95,16 @@ def project_points_zbuffer(xyz: torch.Tensor, rgb: torch.Tensor, K: torch.Tensor
     if dev.type == "cpu":
         from holoflow.geometry.zbuffer_cpu import zbuffer_numpy
 
-        d, o = zbuffer_numpy(ix.numpy(), iy.numpy(), z.detach().contiguous().numpy(), ids.numpy(),
-                             radii.contiguous().numpy(), width, height, N)
+        d, o = zbuffer_numpy(
+            ix.numpy(),
+            iy.numpy(),
+            z.detach().contiguous().numpy(),
+            ids.numpy(),
+            radii.contiguous().numpy(),
+            width,
+            height,
+            N,
+        )
         depth, owner = torch.from_numpy(d), torch.from_numpy(o)
     else:
         depth, owner = _zbuffer_torch(ix, iy, z, ids, radii, rmax, width, height, N)
@@ -119,8 +135,9 @@ def _zbuffer_torch(ix, iy, z, ids, radii, rmax: int, width: int, height: int, N:
     return depth, owner
 
 
-def footprint_radius(xyz: torch.Tensor, viewmat: torch.Tensor, K: torch.Tensor, spacing_rad: float,
-                     max_radius: int = 8) -> torch.Tensor:
+def footprint_radius(
+    xyz: torch.Tensor, viewmat: torch.Tensor, K: torch.Tensor, spacing_rad: float, max_radius: int = 8
+) -> torch.Tensor:
     """Per-point splat radius [N] (long, 1..max_radius) that closes the sampling gaps of a cloud made
     from an equirect grid with angular step ``spacing_rad`` (2 pi / width): a point at distance r from
     the panorama centre stands for a patch about r * spacing_rad wide, which a camera sees

@@ -9,6 +9,7 @@ look_at's exact fallback). ``rig_coverage`` counts how many cameras see each equ
 Smallest square-view FOV that covers the sphere (measured on a 1024x512 grid): 38 cameras 47 deg
 (the paper's 47.4 deg covers it, tested), 26 -> 58, 20 -> 68, 12 -> 88, 8 -> 120 deg.
 """
+
 from __future__ import annotations
 
 import math
@@ -46,8 +47,9 @@ def base_rig(count: int = 38, layout: str = "fibonacci", device=None, dtype=None
 SUPPLEMENTARY = ("above", "below", "left", "right")
 
 
-def supplementary_rig(base_viewmats: torch.Tensor, depths_per_view: torch.Tensor, offset: float = 0.1,
-                      angle_deg: float = 10.0) -> torch.Tensor:
+def supplementary_rig(
+    base_viewmats: torch.Tensor, depths_per_view: torch.Tensor, offset: float = 0.1, angle_deg: float = 10.0
+) -> torch.Tensor:
     """Four supplementary viewmats [4 M, 4, 4] per base camera, ordered (above, below, left, right).
 
     Each is the base camera moved by ``offset * depths_per_view[i]`` (metres; ``offset`` is a fraction
@@ -64,7 +66,9 @@ def supplementary_rig(base_viewmats: torch.Tensor, depths_per_view: torch.Tensor
     moves = torch.tensor([[0, -1, 0], [0, 1, 0], [-1, 0, 0], [1, 0, 0]], dtype=dtype, device=dev)  # [4, 3]
     a = math.radians(angle_deg)
     # T_k: axes of the turned camera in the base camera's frame; above: z -> (0, sin a, cos a) tilts down
-    turns = torch.stack([_rotation(0, -a), _rotation(0, a), _rotation(1, a), _rotation(1, -a)]).to(dtype=dtype, device=dev)
+    turns = torch.stack([_rotation(0, -a), _rotation(0, a), _rotation(1, a), _rotation(1, -a)]).to(
+        dtype=dtype, device=dev
+    )
     out = []
     for k in range(4):
         cam_move = moves[k]
@@ -82,8 +86,9 @@ def _rotation(axis: int, angle: float) -> torch.Tensor:
     return torch.tensor([[c, 0, s], [0, 1.0, 0], [-s, 0, c]], dtype=torch.float64)
 
 
-def rig_coverage(K: torch.Tensor, viewmats: torch.Tensor, width: int, height: int, pano_height: int,
-                 pano_width: int) -> torch.Tensor:
+def rig_coverage(
+    K: torch.Tensor, viewmats: torch.Tensor, width: int, height: int, pano_height: int, pano_width: int
+) -> torch.Tensor:
     """How many cameras see each equirect pixel centre's direction: [pano_height, pano_width] int.
 
     K [3, 3] or [M, 3, 3] for images of ``width`` x ``height``; only rotations count (directions)."""

@@ -20,6 +20,7 @@ is no finer than the view, then each row is box-averaged along the ring over the
 supersample spans (``ring_prefilter``), so a view of the zenith does not alias the polar rows into
 moire. Tested against brute-force supersampling.
 """
+
 from __future__ import annotations
 
 import math
@@ -54,10 +55,10 @@ def pad_equirect(pano: torch.Tensor, pad: int = _PAD) -> torch.Tensor:
         return pano.flatten(-2)[..., flat].reshape(*pano.shape[:-2], H + 2 * pad, W + 2 * pad)
 
     def wrap(x: torch.Tensor) -> torch.Tensor:
-        return torch.cat([x[..., W - pad:], x, x[..., :pad]], dim=-1) if pad else x
+        return torch.cat([x[..., W - pad :], x, x[..., :pad]], dim=-1) if pad else x
 
     half = -(W // 2)  # padded column c reads column c + W // 2 (the definition above, also for odd W)
-    turned = torch.roll(pano[..., :pad, :], half, -1).flip(-2), torch.roll(pano[..., H - pad:, :], half, -1).flip(-2)
+    turned = torch.roll(pano[..., :pad, :], half, -1).flip(-2), torch.roll(pano[..., H - pad :, :], half, -1).flip(-2)
     return wrap(torch.cat([turned[0], pano, turned[1]], dim=-2))
 
 
@@ -95,7 +96,7 @@ def equirect_window(pano: torch.Tensor, row0: int, row1: int, col0: int, col1: i
         while c < col1 + shift:  # contiguous runs between wraps (copies, no index tensors)
             start = c % W
             n = min(W - start, col1 + shift - c)
-            pieces.append(rows[..., start:start + n])
+            pieces.append(rows[..., start : start + n])
             c += n
         return pieces[0] if len(pieces) == 1 else torch.cat(pieces, dim=-1)
 
@@ -112,8 +113,9 @@ def equirect_window(pano: torch.Tensor, row0: int, row1: int, col0: int, col1: i
     return torch.cat(parts, dim=-2) if len(parts) > 1 else parts[0].contiguous()
 
 
-def view_lonlat(K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int, dtype=None
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def view_lonlat(
+    K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int, dtype=None
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Spherical angles of every pixel centre of pinhole views K [B, 3, 3], viewmat [B, 4, 4]:
     (dlon [B, h, w], colat [B, h, w], lon0 [B]), radians, computed in ``dtype`` (default K's).
 
@@ -138,8 +140,9 @@ def view_lonlat(K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int,
     return torch.atan2(x, z), torch.atan2(torch.hypot(x, z), -y), lon0
 
 
-def _sample_views(pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int,
-                  mode: str) -> torch.Tensor:
+def _sample_views(
+    pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int, mode: str
+) -> torch.Tensor:
     """Fast e2p: each view samples only its window of the panorama [C, H, W] (shared) or [B, C, H, W]
     -> [B, C, height, width]."""
     H, W = pano.shape[-2:]
@@ -162,8 +165,15 @@ def _sample_views(pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, he
     return out[0] if len(out) == 1 else torch.cat(out, 0)
 
 
-def equirect_to_pinhole(pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int,
-                        mode: str = "bilinear", supersample: int = 2) -> torch.Tensor:
+def equirect_to_pinhole(
+    pano: torch.Tensor,
+    K: torch.Tensor,
+    viewmat: torch.Tensor,
+    height: int,
+    width: int,
+    mode: str = "bilinear",
+    supersample: int = 2,
+) -> torch.Tensor:
     """Perspective views [B, C, height, width] of a panorama [C, H, W] (shared) or [B, C, H, W].
 
     K [B, 3, 3], viewmat [B, 4, 4] (only the rotation matters: the panorama is seen from its centre).
@@ -197,13 +207,20 @@ def equirect_to_pinhole(pano: torch.Tensor, K: torch.Tensor, viewmat: torch.Tens
             src = levels[(h2, w2, arc)]
         else:
             src = ring_prefilter(resize_equirect(pano[b], h2, w2), arc)
-        fine = _sample_views(src, (scale @ K[b])[None], viewmat[b:b + 1], height * s, width * s, "bilinear")
+        fine = _sample_views(src, (scale @ K[b])[None], viewmat[b : b + 1], height * s, width * s, "bilinear")
         out.append(F.avg_pool2d(fine, s) if s > 1 else fine)  # [1, C, h, w]
     return torch.cat(out, 0)
 
 
-def equirect_to_pinhole_batches(pano: torch.Tensor, K: torch.Tensor, viewmats: torch.Tensor, height: int,
-                                width: int, batch: int = 16, mode: str = "antialias"):
+def equirect_to_pinhole_batches(
+    pano: torch.Tensor,
+    K: torch.Tensor,
+    viewmats: torch.Tensor,
+    height: int,
+    width: int,
+    batch: int = 16,
+    mode: str = "antialias",
+):
     """:func:`equirect_to_pinhole` of a shared panorama [C, H, W] for M cameras (K [3, 3] or [M, 3, 3],
     viewmats [M, 4, 4]), ``batch`` cameras per call (the panorama is prefiltered once per call) so only one
     batch of views is held: yields (index of the batch's first camera, views [n, C, height, width])."""
@@ -214,8 +231,14 @@ def equirect_to_pinhole_batches(pano: torch.Tensor, K: torch.Tensor, viewmats: t
         yield start, equirect_to_pinhole(pano, Kb, viewmats[start:stop], height, width, mode=mode)
 
 
-def pinhole_to_equirect(images: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, height: int, width: int,
-                        weights: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+def pinhole_to_equirect(
+    images: torch.Tensor,
+    K: torch.Tensor,
+    viewmat: torch.Tensor,
+    height: int,
+    width: int,
+    weights: torch.Tensor | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Accumulate perspective views [B, C, h, w] onto an equirect grid: (accum [C, H, W], weight_sum [1, H, W]).
 
     Each equirect pixel centre's direction is projected into every view (rotation only: the views are
@@ -240,21 +263,24 @@ def pinhole_to_equirect(images: torch.Tensor, K: torch.Tensor, viewmat: torch.Te
         inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= w) & (uv[:, 1] >= 0) & (uv[:, 1] <= h)
         grid = torch.stack([uv[:, 0] * (2.0 / w) - 1.0, uv[:, 1] * (2.0 / h) - 1.0], -1)[inside]
         grid = grid.reshape(1, 1, -1, 2)
-        col = F.grid_sample(images[b:b + 1], grid, mode="bilinear", padding_mode="border",
-                            align_corners=False).reshape(C, -1)
+        col = F.grid_sample(
+            images[b : b + 1], grid, mode="bilinear", padding_mode="border", align_corners=False
+        ).reshape(C, -1)
         if weights is None:
             wt = torch.ones_like(col[:1])
         else:
-            wt = F.grid_sample(weights[b:b + 1].to(images.dtype), grid, mode="bilinear", padding_mode="border",
-                               align_corners=False).reshape(1, -1)
+            wt = F.grid_sample(
+                weights[b : b + 1].to(images.dtype), grid, mode="bilinear", padding_mode="border", align_corners=False
+            ).reshape(1, -1)
         idx = (rows[:, None] * width + cols[None, :]).reshape(-1)[inside]
         accum.index_add_(1, idx, col * wt)
         wsum.index_add_(1, idx, wt)
     return accum.reshape(C, height, width), wsum.reshape(1, height, width)
 
 
-def equirect_footprint(K: torch.Tensor, viewmat: torch.Tensor, h: int, w: int, height: int, width: int,
-                       margin: int = 2) -> tuple[int, int, int, int]:
+def equirect_footprint(
+    K: torch.Tensor, viewmat: torch.Tensor, h: int, w: int, height: int, width: int, margin: int = 2
+) -> tuple[int, int, int, int]:
     """Equirect rows [r0, r1) and columns [c0, c1) whose pixel centres may project into a pinhole view
     (K [3, 3], viewmat [4, 4], image h x w) at the panorama centre: a superset, ``margin`` pixels wider.
     Columns may run past [0, width) (they wrap).
@@ -266,9 +292,15 @@ def equirect_footprint(K: torch.Tensor, viewmat: torch.Tensor, h: int, w: int, h
     K, R = K.to(dtype), viewmat[:3, :3].to(dtype)
     xs = torch.arange(w + 1, dtype=dtype, device=K.device)
     ys = torch.arange(h + 1, dtype=dtype, device=K.device)
-    pix = torch.cat([torch.stack([xs, torch.zeros_like(xs)], -1), torch.stack([xs, torch.full_like(xs, h)], -1),
-                     torch.stack([torch.zeros_like(ys), ys], -1), torch.stack([torch.full_like(ys, w), ys], -1),
-                     torch.tensor([[w / 2.0, h / 2.0]], dtype=dtype, device=K.device)])
+    pix = torch.cat(
+        [
+            torch.stack([xs, torch.zeros_like(xs)], -1),
+            torch.stack([xs, torch.full_like(xs, h)], -1),
+            torch.stack([torch.zeros_like(ys), ys], -1),
+            torch.stack([torch.full_like(ys, w), ys], -1),
+            torch.tensor([[w / 2.0, h / 2.0]], dtype=dtype, device=K.device),
+        ]
+    )
     cam = torch.cat([pix, torch.ones_like(pix[:, :1])], -1) @ torch.linalg.inv(K).T  # [M, 3]
     lon, lat = direction_to_lonlat(cam @ R)  # rows of (R^T cam)^T: world rays; the last is the centre's
     poles = torch.tensor([[0.0, -1.0, 0.0], [0.0, 1.0, 0.0]], dtype=dtype, device=K.device)  # north, south
@@ -294,18 +326,18 @@ def ring_prefilter(pano: torch.Tensor, angle: float) -> torch.Tensor:
     as they are (a one-column box centred on a pixel is the pixel)."""
     H, W = pano.shape[-2:]
     colat = (torch.arange(H, dtype=torch.float64, device=pano.device) + 0.5) * (math.pi / H)
-    cols = (angle * W / (2.0 * math.pi) / torch.sin(colat)).clamp(max=float(W))        # [H] box width, px
+    cols = (angle * W / (2.0 * math.pi) / torch.sin(colat)).clamp(max=float(W))  # [H] box width, px
     wide = cols > 1.0
     if not bool(wide.any()):
         return pano
-    rows = torch.nonzero(wide).flatten()                    # the two polar bands
-    x = pano.index_select(-2, rows).double()                                           # [..., h, W]
-    prefix = torch.cat([torch.zeros_like(x[..., :1]), torch.cumsum(x, -1)], -1)        # [..., h, W + 1]
+    rows = torch.nonzero(wide).flatten()  # the two polar bands
+    x = pano.index_select(-2, rows).double()  # [..., h, W]
+    prefix = torch.cat([torch.zeros_like(x[..., :1]), torch.cumsum(x, -1)], -1)  # [..., h, W + 1]
     total = prefix[..., -1:]
-    half = 0.5 * cols[rows, None]                                                      # [h, 1]
-    centre = torch.arange(W, dtype=torch.float64, device=pano.device) + 0.5            # [W]
+    half = 0.5 * cols[rows, None]  # [h, 1]
+    centre = torch.arange(W, dtype=torch.float64, device=pano.device) + 0.5  # [W]
 
-    def integral(u: torch.Tensor) -> torch.Tensor:    # sum of the row over [0, u), u [h, W] any real
+    def integral(u: torch.Tensor) -> torch.Tensor:  # sum of the row over [0, u), u [h, W] any real
         turns = torch.floor(u / W)
         r = u - turns * W
         k = torch.clamp(torch.floor(r).long(), 0, W - 1).expand(x.shape)
@@ -330,9 +362,10 @@ def resize_equirect(pano: torch.Tensor, height: int, width: int) -> torch.Tensor
     p, q = k * (W // g), k * (width // g)  # p source columns pad <-> exactly q output columns
     cols = torch.remainder(torch.arange(-p, W + p, device=pano.device), W)
     x = x[..., cols]
-    out = F.interpolate(x, size=(height, width + 2 * q), mode="bilinear", align_corners=False,
-                        antialias=(height < H or width < W))
-    return out[..., q:q + width].reshape(*lead, pano.shape[-3], height, width)
+    out = F.interpolate(
+        x, size=(height, width + 2 * q), mode="bilinear", align_corners=False, antialias=(height < H or width < W)
+    )
+    return out[..., q : q + width].reshape(*lead, pano.shape[-3], height, width)
 
 
 def resize_pano(pano: np.ndarray, width: int) -> np.ndarray:

@@ -5,6 +5,7 @@ lon = 2*pi*u/W - pi in [-pi, pi), lat = pi/2 - pi*v/H in [-pi/2, pi/2]; directio
 (cos lat sin lon, -sin lat, cos lat cos lon) in the world frame (+x right, +y down, +z forward), so the
 image centre looks along +z and the top row looks up (-y). Angles are radians.
 """
+
 from __future__ import annotations
 
 import math
@@ -12,16 +13,18 @@ import math
 import torch
 
 
-def equirect_pixel_to_lonlat(u: torch.Tensor, v: torch.Tensor, width: int, height: int
-                             ) -> tuple[torch.Tensor, torch.Tensor]:
+def equirect_pixel_to_lonlat(
+    u: torch.Tensor, v: torch.Tensor, width: int, height: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Continuous equirect pixel coords (u, v) [...] -> (lon, lat) [...] in radians."""
     lon = u * (2.0 * math.pi / width) - math.pi
     lat = math.pi / 2.0 - v * (math.pi / height)
     return lon, lat
 
 
-def lonlat_to_equirect_pixel(lon: torch.Tensor, lat: torch.Tensor, width: int, height: int
-                             ) -> tuple[torch.Tensor, torch.Tensor]:
+def lonlat_to_equirect_pixel(
+    lon: torch.Tensor, lat: torch.Tensor, width: int, height: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """(lon, lat) [...] radians -> continuous equirect pixel coords (u, v) [...]; u wrapped into [0, W)."""
     u = torch.remainder((lon + math.pi) * (width / (2.0 * math.pi)), float(width))
     u = torch.where(u >= width, torch.zeros_like(u), u)  # remainder may round up to W

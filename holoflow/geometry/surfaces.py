@@ -24,6 +24,7 @@ Conventions: radial depth in metres, finite > 0 wherever a surface is (sky alrea
 holoflow/geometry/pointcloud.py); NaN / inf / <= 0 = no surface (kept as is, normal facing the
 centre); world frame and pixel centres of docs/conventions.md.
 """
+
 from __future__ import annotations
 
 import torch
@@ -50,11 +51,12 @@ def depth_noise(radial_depth: torch.Tensor, edge: float = 0.05) -> float:
     ok = valid & _shift(valid, 0, 1) & _shift(valid, 0, -1) & _shift(valid, 1, 0) & _shift(valid, -1, 0)
     r = (logd - around)[ok].abs()
     r = r[r < edge]
-    return float(1.4826 * r.median() / 1.25 ** 0.5) if r.numel() else 0.0
+    return float(1.4826 * r.median() / 1.25**0.5) if r.numel() else 0.0
 
 
-def smooth_depth(radial_depth: torch.Tensor, radius: int = 2, range_rel: float = 0.05, noise_factor: float = 0.0
-                 ) -> torch.Tensor:
+def smooth_depth(
+    radial_depth: torch.Tensor, radius: int = 2, range_rel: float = 0.05, noise_factor: float = 0.0
+) -> torch.Tensor:
     """Edge-aware smoothing of radial_depth [H, W] (metres; module docstring): [H, W], same dtype.
     radius (px): half window (0: unchanged); range_rel: relative depth difference at which a
     neighbour's weight falls to exp(-1/2); with noise_factor > 0 it is at most noise_factor x the
@@ -89,19 +91,19 @@ def surface_normals(radial_depth: torch.Tensor, tol: float = 0.1, radius: int = 
     least-squares plane: what noise is left in the depth tilts a one-pixel tangent by tens of degrees)."""
     H, W = radial_depth.shape
     d = radial_depth
-    dirs = equirect_directions(H, W, device=d.device, dtype=d.dtype)                  # [H, W, 3]
+    dirs = equirect_directions(H, W, device=d.device, dtype=d.dtype)  # [H, W, 3]
     valid = torch.isfinite(d) & (d > 0)
     safe = torch.where(valid, d, torch.ones_like(d))
-    p = dirs * safe[..., None]                                                         # [H, W, 3]
+    p = dirs * safe[..., None]  # [H, W, 3]
 
     def tangent(dy: int, dx: int) -> tuple[torch.Tensor, torch.Tensor]:
         """Tangent [H, W, 3] along one image axis (per pixel step) and whether it is known [H, W]."""
-        fwd, bwd = _shift(p, dy, dx) - p, p - _shift(p, -dy, -dx)                       # [H, W, 3]
+        fwd, bwd = _shift(p, dy, dx) - p, p - _shift(p, -dy, -dx)  # [H, W, 3]
         rel_f = (_shift(safe, dy, dx) / safe).log().abs()
         rel_b = (_shift(safe, -dy, -dx) / safe).log().abs()
         ok_f = _shift(valid, dy, dx) & valid & (rel_f < tol)
         ok_b = _shift(valid, -dy, -dx) & valid & (rel_b < tol)
-        if dy:   # the pole rows have no neighbour beyond them (clamped rows read the pixel itself)
+        if dy:  # the pole rows have no neighbour beyond them (clamped rows read the pixel itself)
             rows = torch.arange(H, device=d.device)[:, None]
             ok_f &= (rows + dy >= 0) & (rows + dy < H)
             ok_b &= (rows - dy >= 0) & (rows - dy < H)
@@ -109,8 +111,8 @@ def surface_normals(radial_depth: torch.Tensor, tol: float = 0.1, radius: int = 
         one = torch.where((ok_f & (~ok_b | (rel_f <= rel_b)))[..., None], fwd, bwd)
         return torch.where(both, 0.5 * (fwd + bwd), one), ok_f | ok_b
 
-    t_u, ok_u = tangent(0, 1)       # east, one column
-    t_v, ok_v = tangent(1, 0)       # south, one row
+    t_u, ok_u = tangent(0, 1)  # east, one column
+    t_v, ok_v = tangent(1, 0)  # south, one row
     if radius > 0:
         logd = safe.log()
         sum_u, sum_v = torch.zeros_like(t_u), torch.zeros_like(t_v)

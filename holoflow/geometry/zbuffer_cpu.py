@@ -2,6 +2,7 @@
 writes its square once, instead of one masked pass over every point per square offset. Same result
 bit for bit (nearest z wins, ties to the lowest point index); the torch path stays the reference and
 the path for other devices (tests compare the two)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,8 +23,9 @@ def zbuffer(ix, iy, z, ids, radii, width, height, depth, owner):
                     owner[p] = ids[k]
 
 
-def zbuffer_numpy(ix: np.ndarray, iy: np.ndarray, z: np.ndarray, ids: np.ndarray, radii: np.ndarray,
-                  width: int, height: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+def zbuffer_numpy(
+    ix: np.ndarray, iy: np.ndarray, z: np.ndarray, ids: np.ndarray, radii: np.ndarray, width: int, height: int, n: int
+) -> tuple[np.ndarray, np.ndarray]:
     """(depth [H W], owner [H W]) of the points (int64 pixel ix, iy [M]; z [M]; ids, radii [M] int64)."""
     depth = np.full(height * width, np.inf, z.dtype)
     owner = np.full(height * width, n, np.int64)

@@ -1,5 +1,6 @@
 """Colour, the one module: linear light <-> sRGB (IEC 61966-2-1) on numpy arrays and on torch tensors,
 8-bit conversion, luminance. numpy only at import (the torch pair imports kornia when called)."""
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -30,7 +31,7 @@ def linear_to_srgb_torch(x: "torch.Tensor") -> "torch.Tensor":
     the Gaussians are trained and scored on (holoflow.recon.views)."""
     import kornia
 
-    c = x.clamp(0, 1).movedim(-1, -3)                                  # [..., 3, H, W]
+    c = x.clamp(0, 1).movedim(-1, -3)  # [..., 3, H, W]
     return kornia.color.linear_rgb_to_rgb(c).clamp(0, 1).movedim(-3, -1)
 
 

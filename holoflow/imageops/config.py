@@ -1,5 +1,6 @@
 """Parameters and engines of the panorama image stages: stylize, upscale, detail (stages/*.py).
 Imports nothing heavy. Engine signatures: docs/extending.md."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -9,8 +10,13 @@ from holoflow.flow.params import Engines, StageParams, param
 
 def max_width_param() -> int:
     """The ``max_width`` field that stylize, upscale and detail share: how wide an input may stay."""
-    return param(2048, "an input wider than width keeps its own width up to this, and is resized to it beyond "
-                 "(a user's photo is never shrunk below it; holoflow/imageops/photo.py); 0 = no cap", "px", ge=0)
+    return param(
+        2048,
+        "an input wider than width keeps its own width up to this, and is resized to it beyond "
+        "(a user's photo is never shrunk below it; holoflow/imageops/photo.py); 0 = no cap",
+        "px",
+        ge=0,
+    )
 
 
 @dataclass(frozen=True)
@@ -18,18 +24,21 @@ class StylizeParams(StageParams):
     """Lineart of the base panorama -> stylized panorama (docs/panorama.md)."""
 
     ENGINES = Engines(
-        "engine(base: [H, W, 3] linear, prompt: str, cfg: StylizeParams, seed: int, device: str, progress)"
-        " -> Stylized",
+        "engine(base: [H, W, 3] linear, prompt: str, cfg: StylizeParams, seed: int, device: str, progress) -> Stylized",
         weights={"controlnet_lineart": (("model", "sd15"), ("controlnet", "controlnet_lineart"))},
         classical="holoflow.imageops.engines:stylize_classical",
-        controlnet_lineart="holoflow.networks.controlnet_lineart:stylize_engine")
+        controlnet_lineart="holoflow.networks.controlnet_lineart:stylize_engine",
+    )
 
     width: int = param(1024, "output width (lineart and stylized panorama)", "px", ge=1)
     height: int = param(512, "output height", "px", ge=1)
     max_width: int = max_width_param()
-    style: str = param("auto", "auto = from the prompt's style words; none = passthrough; or a style name "
-                       "(holoflow/imageops/styles.py). A user's photo with no style asked for passes "
-                       "through with any engine")
+    style: str = param(
+        "auto",
+        "auto = from the prompt's style words; none = passthrough; or a style name "
+        "(holoflow/imageops/styles.py). A user's photo with no style asked for passes "
+        "through with any engine",
+    )
     model: str = param("", "controlnet_lineart: SD 1.5 base model (local dir or id in the user's cache)")
     controlnet: str = param("", "controlnet_lineart: ControlNet Lineart weights (local dir or id)")
     steps: int = param(20, "controlnet_lineart: denoising steps", ge=1)
@@ -45,7 +54,8 @@ class UpscaleParams(StageParams):
         " -> ([h, w, 3] linear, meta: dict)",
         weights={"realesrgan": (("model", "realesrgan"),)},
         lanczos="holoflow.imageops.engines:upscale_lanczos",
-        realesrgan="holoflow.networks.realesrgan:upscale_engine")
+        realesrgan="holoflow.networks.realesrgan:upscale_engine",
+    )
 
     width: int = param(2048, "output width", "px", ge=1)
     height: int = param(1024, "output height", "px", ge=1)
@@ -63,13 +73,13 @@ class DetailParams(StageParams):
         " -> ([h, w, 3] linear, meta: dict)",
         weights={"controlnet_tile": (("model", "tile_base"), ("controlnet", "controlnet_tile"))},
         classical="holoflow.imageops.engines:detail_classical",
-        controlnet_tile="holoflow.networks.controlnet_tile:detail_engine")
+        controlnet_tile="holoflow.networks.controlnet_tile:detail_engine",
+    )
 
     width: int = param(2048, "output width", "px", ge=1)
     height: int = param(1024, "output height", "px", ge=1)
     max_width: int = max_width_param()
-    strength: float = param(0.5, "classical: detail boost (0 = plain resize); controlnet_tile: img2img strength",
-                            ge=0)
+    strength: float = param(0.5, "classical: detail boost (0 = plain resize); controlnet_tile: img2img strength", ge=0)
     model: str = param("", "controlnet_tile: SD 1.5 base model")
     controlnet: str = param("", "controlnet_tile: ControlNet Tile weights")
     tile: int = param(512, "controlnet_tile: tile side", "px", ge=1)

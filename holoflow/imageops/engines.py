@@ -1,5 +1,6 @@
 """The classical (weight-free) engines of stylize, upscale and detail, at their stages' engine
 signatures (holoflow/imageops/config.py). Panoramas are linear RGB [H, W, 3]."""
+
 from __future__ import annotations
 
 import numpy as np

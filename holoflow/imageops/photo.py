@@ -14,6 +14,7 @@ changed them). The rules, for every engine:
 
 Without a style the detail panorama is then the photo itself, value for value.
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -61,8 +62,9 @@ def same_pixels(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and bool(np.array_equal(a, b))
 
 
-def unstyled_photo(photo: np.ndarray, width: int, height: int, max_width: int
-                   ) -> tuple[np.ndarray, np.ndarray, dict[str, Any], dict[str, Any]]:
+def unstyled_photo(
+    photo: np.ndarray, width: int, height: int, max_width: int
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any], dict[str, Any]]:
     """stylize for a user's photo with no style asked for, as a stylize engine returns it: the photo
     [H, W, 3] linear at its own size (:func:`keep_size`; wider than ``max_width``: Lanczos-resized to it),
     its XDoG lineart [h, w] (1 = line), header attributes and record facts."""

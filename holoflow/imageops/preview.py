@@ -1,4 +1,5 @@
 """PNG previews (sRGB, 8-bit) of linear images, for docs and people; never an artifact the pipeline reads."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,5 +1,6 @@
 """Wrap-aware Lanczos-3 resize of panoramas: separable, as two sparse matrix products (the fast path),
 with OpenImageIO's 2-D lanczos3 resize as the reference (``lanczos_resize_reference``)."""
+
 from __future__ import annotations
 
 import math
@@ -8,7 +9,9 @@ import numpy as np
 
 from holoflow.imageops.wrap import crop_columns, pad_columns
 
-LANCZOS_PAD = 8     # reference path: source columns of circular padding (Lanczos-3 reaches 3 px; 8 leaves room when shrinking)
+LANCZOS_PAD = (
+    8  # reference path: source columns of circular padding (Lanczos-3 reaches 3 px; 8 leaves room when shrinking)
+)
 
 
 def lanczos_weights(n_in: int, n_out: int, wrap: bool):
@@ -21,10 +24,10 @@ def lanczos_weights(n_in: int, n_out: int, wrap: bool):
 
     scale = n_in / n_out
     stretch = max(scale, 1.0)
-    reach = 3.0 * stretch                                         # source pixels either side
-    x = (np.arange(n_out) + 0.5) * scale - 0.5                    # [n_out]
+    reach = 3.0 * stretch  # source pixels either side
+    x = (np.arange(n_out) + 0.5) * scale - 0.5  # [n_out]
     taps = int(math.ceil(2 * reach)) + 1
-    k = np.floor(x - reach).astype(np.int64)[:, None] + 1 + np.arange(taps)[None, :]   # [n_out, taps]
+    k = np.floor(x - reach).astype(np.int64)[:, None] + 1 + np.arange(taps)[None, :]  # [n_out, taps]
     d = (k - x[:, None]) / stretch
     w = np.where(np.abs(d) < 3.0, np.sinc(d) * np.sinc(d / 3.0), 0.0)
     w /= w.sum(axis=1, keepdims=True)
@@ -51,9 +54,9 @@ def lanczos_resize(img: np.ndarray, width: int, height: int, wrap: bool = True) 
         return img[..., 0].copy() if squeeze else img.copy()
     rows = lanczos_weights(h, height, False).astype(np.float32)
     cols = lanczos_weights(w, width, wrap).astype(np.float32)
-    out = (rows @ img.reshape(h, w * c)).reshape(height, w, c)                    # [height, w, c]
+    out = (rows @ img.reshape(h, w * c)).reshape(height, w, c)  # [height, w, c]
     out = (cols @ out.transpose(1, 0, 2).reshape(w, height * c)).reshape(width, height, c)
-    res = np.ascontiguousarray(out.transpose(1, 0, 2), dtype=np.float32)         # [height, width, c]
+    res = np.ascontiguousarray(out.transpose(1, 0, 2), dtype=np.float32)  # [height, width, c]
     return res[..., 0] if squeeze else res
 
 
@@ -73,7 +76,7 @@ def lanczos_resize_reference(img: np.ndarray, width: int, height: int, wrap: boo
     h, w, c = img.shape
     src_pad = dst_pad = 0
     if wrap:
-        step = w // math.gcd(w, width)                    # source columns per whole output column count
+        step = w // math.gcd(w, width)  # source columns per whole output column count
         src_pad = step * math.ceil(max(LANCZOS_PAD, 3 * w / width) / step)
         dst_pad = src_pad * width // w
         img = pad_columns(img, src_pad)

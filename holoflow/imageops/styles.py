@@ -4,6 +4,7 @@ Each style is an OpenCV filter on the 8-bit sRGB panorama (wrap-padded) that kee
 geometry: the filters are local and edge-preserving, and the line-based styles draw the lineart itself.
 No style word -> ``None`` (passthrough). Vocabulary in ``STYLE_WORDS`` (documented in docs/panorama.md).
 """
+
 from __future__ import annotations
 
 import re
@@ -14,11 +15,27 @@ from holoflow.imageops.color import linear_to_uint8, uint8_to_linear
 from holoflow.imageops.wrap import wrap_filter
 
 STYLE_WORDS = {
-    "watercolor": "watercolor", "watercolour": "watercolor", "aquarelle": "watercolor",
-    "oil": "oil", "impasto": "oil", "impressionist": "impressionist", "impressionism": "impressionist",
-    "pencil": "pencil", "sketch": "pencil", "graphite": "pencil", "charcoal": "pencil",
-    "cartoon": "cartoon", "anime": "cartoon", "comic": "cartoon", "manga": "cartoon", "cel": "cartoon",
-    "ink": "ink", "lineart": "ink", "pastel": "pastel", "pixel": "pixel", "pixelated": "pixel",
+    "watercolor": "watercolor",
+    "watercolour": "watercolor",
+    "aquarelle": "watercolor",
+    "oil": "oil",
+    "impasto": "oil",
+    "impressionist": "impressionist",
+    "impressionism": "impressionist",
+    "pencil": "pencil",
+    "sketch": "pencil",
+    "graphite": "pencil",
+    "charcoal": "pencil",
+    "cartoon": "cartoon",
+    "anime": "cartoon",
+    "comic": "cartoon",
+    "manga": "cartoon",
+    "cel": "cartoon",
+    "ink": "ink",
+    "lineart": "ink",
+    "pastel": "pastel",
+    "pixel": "pixel",
+    "pixelated": "pixel",
     "8bit": "pixel",
 }
 
@@ -45,7 +62,7 @@ def stylize(rgb: np.ndarray, lines: np.ndarray, style: str) -> np.ndarray:
     fn = _STYLES.get(style)
     if fn is None:
         raise ValueError(f"unknown style {style!r}; known: {sorted(_STYLES)}")
-    img = linear_to_uint8(np.clip(rgb, 0.0, 1.0))                                   # [H, W, 3] sRGB, RGB order
+    img = linear_to_uint8(np.clip(rgb, 0.0, 1.0))  # [H, W, 3] sRGB, RGB order
     pad = max(16, img.shape[1] // 16)
     out = wrap_filter(img, pad, fn)
     out = _draw_lines(out, lines, _LINE_WEIGHT.get(style, 0.0))
@@ -74,7 +91,7 @@ def _oil(img: np.ndarray, size_div: int = 110, levels: int = 20) -> np.ndarray:
 
     size = max(3, img.shape[0] // size_div) | 1
     gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
-    q = (gray.astype(np.int32) * levels) // 256                                       # [H, W] level
+    q = (gray.astype(np.int32) * levels) // 256  # [H, W] level
     f = img.astype(np.float32)
     best = np.full(gray.shape, -1.0, np.float32)
     out = np.zeros_like(f)
@@ -113,7 +130,7 @@ def _cartoon(img: np.ndarray) -> np.ndarray:
     for _ in range(2):
         s = cv2.bilateralFilter(s, 7, 40, 5)
     lab = cv2.cvtColor(s, cv2.COLOR_RGB2Lab)
-    lab[..., 0] = (lab[..., 0] // 36) * 36 + 18                                     # flat tone bands
+    lab[..., 0] = (lab[..., 0] // 36) * 36 + 18  # flat tone bands
     return cv2.cvtColor(lab, cv2.COLOR_Lab2RGB)
 
 
@@ -121,7 +138,7 @@ def _ink(img: np.ndarray) -> np.ndarray:
     import cv2
 
     gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).astype(np.float32)
-    wash = 235.0 - 0.25 * (255.0 - gray)                                            # faint grey wash
+    wash = 235.0 - 0.25 * (255.0 - gray)  # faint grey wash
     return np.repeat(np.clip(wash, 0, 255).astype(np.uint8)[..., None], 3, axis=2)
 
 
@@ -146,8 +163,23 @@ def _pixel(img: np.ndarray) -> np.ndarray:
     return cv2.resize(small, (w, h), interpolation=cv2.INTER_NEAREST)
 
 
-_STYLES = {"watercolor": _watercolor, "oil": _oil, "impressionist": _impressionist, "pencil": _pencil,
-           "cartoon": _cartoon, "ink": _ink, "pastel": _pastel, "pixel": _pixel}
+_STYLES = {
+    "watercolor": _watercolor,
+    "oil": _oil,
+    "impressionist": _impressionist,
+    "pencil": _pencil,
+    "cartoon": _cartoon,
+    "ink": _ink,
+    "pastel": _pastel,
+    "pixel": _pixel,
+}
 # how strongly each style draws the lineart over its result (0 = not at all)
-_LINE_WEIGHT = {"watercolor": 0.35, "pencil": 0.6, "cartoon": 0.85, "ink": 0.95, "pastel": 0.25,
-                "oil": 0.15, "impressionist": 0.1}
+_LINE_WEIGHT = {
+    "watercolor": 0.35,
+    "pencil": 0.6,
+    "cartoon": 0.85,
+    "ink": 0.95,
+    "pastel": 0.25,
+    "oil": 0.15,
+    "impressionist": 0.1,
+}

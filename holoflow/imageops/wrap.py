@@ -1,4 +1,5 @@
 """Wrap-aware filtering: pad columns circularly (longitude wraps), filter, crop back."""
+
 from __future__ import annotations
 
 from typing import Callable
@@ -16,7 +17,7 @@ def pad_columns(img: np.ndarray, pad: int) -> np.ndarray:
 
 def crop_columns(img: np.ndarray, pad: int) -> np.ndarray:
     """Inverse of ``pad_columns``: drop ``pad`` columns on each side."""
-    return np.ascontiguousarray(img[:, pad:img.shape[1] - pad]) if pad else img
+    return np.ascontiguousarray(img[:, pad : img.shape[1] - pad]) if pad else img
 
 
 def wrap_filter(img: np.ndarray, pad: int, fn: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:

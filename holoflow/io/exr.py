@@ -5,6 +5,7 @@ depth as Z (metres; the header's ``holoflow.depth_kind`` says radial / z / dispa
 own name. Header attributes are str, int or float; other JSON-able values are stored as JSON strings and
 decoded on read. Same arrays + attributes -> same bytes, which the store's early cutoff relies on.
 """
+
 from __future__ import annotations
 
 import json
@@ -13,8 +14,17 @@ from typing import Any
 
 import numpy as np
 
-_STANDARD = {"channels", "compression", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
-             "screenWindowCenter", "screenWindowWidth", "type"}
+_STANDARD = {
+    "channels",
+    "compression",
+    "dataWindow",
+    "displayWindow",
+    "lineOrder",
+    "pixelAspectRatio",
+    "screenWindowCenter",
+    "screenWindowWidth",
+    "type",
+}
 _JSON_PREFIX = "json:"
 
 
@@ -31,7 +41,9 @@ def write_exr(path: str | Path, channels: dict[str, np.ndarray], attrs: dict[str
     arrays = {name: np.ascontiguousarray(np.asarray(a, dtype=np.float32)) for name, a in channels.items()}
     shapes = {a.shape for a in arrays.values()}
     if len(shapes) != 1 or len(next(iter(shapes))) != 2:
-        raise ExrError(f"write_exr: channels must share one [H, W] shape, got { {k: a.shape for k, a in arrays.items()} }")
+        raise ExrError(
+            f"write_exr: channels must share one [H, W] shape, got { {k: a.shape for k, a in arrays.items()} }"
+        )
     height, width = next(iter(shapes))
     if height < 1 or width < 1:
         raise ExrError(f"write_exr: empty image {height}x{width}")
@@ -65,8 +77,7 @@ def read_exr(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     return channels, attrs
 
 
-def write_rgb(path: str | Path, rgb: np.ndarray, attrs: dict[str, Any] | None = None,
-              **extra: np.ndarray) -> None:
+def write_rgb(path: str | Path, rgb: np.ndarray, attrs: dict[str, Any] | None = None, **extra: np.ndarray) -> None:
     """Write a linear RGB image [H, W, 3] as R, G, B plus named extra channels (e.g. Z=depth, A=mask)."""
     rgb = np.asarray(rgb)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
@@ -112,7 +123,7 @@ def _encode_attr(value: Any) -> Any:
 
 def _decode_attr(value: Any) -> Any:
     if isinstance(value, str) and value.startswith(_JSON_PREFIX):
-        return json.loads(value[len(_JSON_PREFIX):])
+        return json.loads(value[len(_JSON_PREFIX) :])
     if isinstance(value, bytes):
         return value.decode("utf-8", "replace")
     return value

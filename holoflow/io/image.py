@@ -10,6 +10,7 @@ line giving the size. XMP GPano metadata (Google's photo-sphere tags) is honoure
 (``GPano:CroppedAreaImageWidthPixels`` < ``GPano:FullPanoWidthPixels``) is placed at its
 ``CroppedAreaLeftPixels`` / ``CroppedAreaTopPixels`` into the full equirect canvas (black elsewhere).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -21,8 +22,14 @@ from .validate import InputRefused, check_equirect_size, colour_rule, describe, 
 
 #: extensions that import as images (EXR is read by holoflow.io.exr when it is a holoflow file)
 IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".hdr", ".exr")
-_GPANO = ("FullPanoWidthPixels", "FullPanoHeightPixels", "CroppedAreaImageWidthPixels",
-          "CroppedAreaImageHeightPixels", "CroppedAreaLeftPixels", "CroppedAreaTopPixels")
+_GPANO = (
+    "FullPanoWidthPixels",
+    "FullPanoHeightPixels",
+    "CroppedAreaImageWidthPixels",
+    "CroppedAreaImageHeightPixels",
+    "CroppedAreaLeftPixels",
+    "CroppedAreaTopPixels",
+)
 
 
 class ImageImportError(InputRefused):
@@ -38,19 +45,21 @@ def read_panorama_image(path: str | Path) -> tuple[np.ndarray, dict]:
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         why = (oiio.geterror().strip() or "unknown format").splitlines()[0]
-        raise ImageImportError(f"{path.name}: OpenImageIO cannot read it ({why}); "
-                               "fix: pass a JPG, PNG, TIFF, HDR or EXR panorama")
+        raise ImageImportError(
+            f"{path.name}: OpenImageIO cannot read it ({why}); fix: pass a JPG, PNG, TIFF, HDR or EXR panorama"
+        )
     try:
         spec = inp.spec()
         fmt = str(spec.format)
-        codes = fmt in ("uint8", "uint16")          # read as stored: linearised through a table below
+        codes = fmt in ("uint8", "uint16")  # read as stored: linearised through a table below
         pixels = inp.read_image(0, 0, 0, min(spec.nchannels, 4), fmt if codes else "float")
         damage = inp.geterror().strip() if inp.has_error else ""
     finally:
         inp.close()
-    if damage:        # a file cut short or corrupt: the decoder filled what it could not read
-        raise ImageImportError(f"{path.name} is damaged (the decoder says: {damage.splitlines()[0]}); "
-                               "fix: copy or export the file again")
+    if damage:  # a file cut short or corrupt: the decoder filled what it could not read
+        raise ImageImportError(
+            f"{path.name} is damaged (the decoder says: {damage.splitlines()[0]}); fix: copy or export the file again"
+        )
     if pixels is None or spec.width < 1 or spec.height < 1:
         raise ImageImportError(f"{path.name}: no pixels could be read; fix: check the file")
     img = np.asarray(pixels).reshape(spec.height, spec.width, -1)
@@ -60,7 +69,7 @@ def read_panorama_image(path: str | Path) -> tuple[np.ndarray, dict]:
     if integer:
         from holoflow.imageops.color import srgb_to_linear
 
-        if codes:     # one table entry per code: the same curve, 1 / 30 of the time on a 6656 px photo
+        if codes:  # one table entry per code: the same curve, 1 / 30 of the time on a 6656 px photo
             top = np.iinfo(img.dtype).max
             # code x (1 / top) in float32: OpenImageIO's own conversion, so the values are its float read's
             rgb = srgb_to_linear(np.arange(top + 1, dtype=np.float32) * np.float32(1.0 / top))[rgb]
@@ -71,8 +80,13 @@ def read_panorama_image(path: str | Path) -> tuple[np.ndarray, dict]:
         rgb, counts = repair_colour(rgb)
     except ValueError as e:
         raise ImageImportError(f"{path.name}: {e}") from None
-    facts = {"file": path.name, "sha256": _sha256(path), "size": [spec.width, spec.height],
-             "format": fmt, "colour": colour}
+    facts = {
+        "file": path.name,
+        "sha256": _sha256(path),
+        "size": [spec.width, spec.height],
+        "format": fmt,
+        "colour": colour,
+    }
     if counts:
         facts["repaired"] = f"R,G,B: {describe(counts, rgb.size)} ({colour_rule()})"
     gpano = {k: spec.getattribute(f"GPano:{k}") for k in _GPANO}
@@ -98,14 +112,23 @@ def place_cropped(rgb: np.ndarray, gpano: dict) -> tuple[np.ndarray, dict]:
         return rgb, {"cropped": False}
     s = w / max(cw, 1)
     FW, FH = int(round(full_w * s)), int(round(full_h * s))
-    left, top = int(round(gpano.get("CroppedAreaLeftPixels", 0) * s)), int(round(gpano.get("CroppedAreaTopPixels", 0) * s))
+    left, top = (
+        int(round(gpano.get("CroppedAreaLeftPixels", 0) * s)),
+        int(round(gpano.get("CroppedAreaTopPixels", 0) * s)),
+    )
     out = np.zeros((FH, FW, 3), np.float32)
     rows = np.arange(h) + top
     keep = (rows >= 0) & (rows < FH)
     cols = (np.arange(w) + left) % FW
     out[np.ix_(rows[keep], cols)] = rgb[keep]
-    return out, {"cropped": True, "full": [FW, FH], "left": left, "top": top, "crop": [w, h],
-                 "note": "placed into the full equirect canvas from XMP GPano; uncovered pixels are black"}
+    return out, {
+        "cropped": True,
+        "full": [FW, FH],
+        "left": left,
+        "top": top,
+        "crop": [w, h],
+        "note": "placed into the full equirect canvas from XMP GPano; uncovered pixels are black",
+    }
 
 
 def _sha256(path: Path) -> str:

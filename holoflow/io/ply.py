@@ -5,6 +5,7 @@ Gaussians (INRIA 3DGS layout): ``x y z nx ny nz f_dc_0..2 [f_rest_0..] opacity s
 all float32, stored BEFORE activation: opacity is a logit, scales are log-scales, f_dc = (rgb - 0.5) /
 0.28209479 (SH degree 0 coefficient), rot is a (w, x, y, z) quaternion, not necessarily normalised.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -66,9 +67,11 @@ def read_point_normals(path: str | Path) -> np.ndarray | None:
 
 def gaussian_fields(num_rest: int = 0) -> list[str]:
     """Property names of the 3DGS layout, in file order; ``num_rest`` = count of f_rest_* values."""
-    return (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
-            + [f"f_rest_{i}" for i in range(num_rest)]
-            + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    return (
+        ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+        + [f"f_rest_{i}" for i in range(num_rest)]
+        + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    )
 
 
 def write_gaussians(path: str | Path, fields: dict[str, np.ndarray]) -> None:

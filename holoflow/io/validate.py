@@ -12,13 +12,14 @@ A step's outputs: every float in an EXR or PLY must be finite, except +inf in a 
 EXR whose ``holoflow.depth_kind`` is radial, z or unset): sky. The first file that breaks it fails the step in
 one line naming the stage, the file, the channel and the counts, before anything is committed.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
-MAX_LINEAR = 65504.0        # largest finite half float: the brightest value an HDR EXR can hold
+MAX_LINEAR = 65504.0  # largest finite half float: the brightest value an HDR EXR can hold
 DEPTH_KINDS = ("radial", "z")  # EXR depth kinds whose Z may be +inf (sky)
 
 
@@ -27,8 +28,7 @@ def repair_colour(rgb: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
     counts of values changed per reason; empty when nothing changed). Raises ValueError when no value
     is finite (nothing to keep)."""
     x = np.asarray(rgb, np.float32)
-    counts = {"nan": int(np.isnan(x).sum()), "+inf": int(np.isposinf(x).sum()),
-              "-inf": int(np.isneginf(x).sum())}
+    counts = {"nan": int(np.isnan(x).sum()), "+inf": int(np.isposinf(x).sum()), "-inf": int(np.isneginf(x).sum())}
     finite = np.isfinite(x)
     if x.size and not finite.any():
         raise ValueError("no colour value is finite (all NaN / inf); fix: check the file")
@@ -45,8 +45,12 @@ def depth_problems(z: np.ndarray) -> dict[str, int]:
     """Counts of the values that make a depth channel (metres, +inf = sky) untrustworthy: NaN, -inf,
     zero, negative. Empty when it is usable."""
     z = np.asarray(z)
-    counts = {"nan": int(np.isnan(z).sum()), "-inf": int(np.isneginf(z).sum()),
-              "zero": int((z == 0).sum()), "negative": int((np.isfinite(z) & (z < 0)).sum())}
+    counts = {
+        "nan": int(np.isnan(z).sum()),
+        "-inf": int(np.isneginf(z).sum()),
+        "zero": int((z == 0).sum()),
+        "negative": int((np.isfinite(z) & (z < 0)).sum()),
+    }
     return {k: v for k, v in counts.items() if v}
 
 
@@ -76,14 +80,14 @@ def _exr_problem(path: Path) -> str | None:
     from .exr import read_exr
 
     channels, attrs = read_exr(path)
-    sky_ok = attrs.get("holoflow.depth_kind", "radial") in DEPTH_KINDS   # no kind: radial, as readers take it
+    sky_ok = attrs.get("holoflow.depth_kind", "radial") in DEPTH_KINDS  # no kind: radial, as readers take it
     for name in sorted(channels):
         a = channels[name]
         if np.isfinite(a).all():
             continue
         nan, pinf, ninf = int(np.isnan(a).sum()), int(np.isposinf(a).sum()), int(np.isneginf(a).sum())
         if name == "Z" and sky_ok and not nan and not ninf:
-            continue                                            # +inf: sky
+            continue  # +inf: sky
         return f"channel {name} has {nan} NaN, {pinf} +inf, {ninf} -inf of {a.size} values"
     return None
 
@@ -105,17 +109,21 @@ class InputRefused(ValueError):
     """A user's file that cannot be imported: one line, with the fix."""
 
 
-MIN_HEIGHT = 8   # px: an equirect panorama smaller than 16 x 8 has no room for the depth stages' faces
+MIN_HEIGHT = 8  # px: an equirect panorama smaller than 16 x 8 has no room for the depth stages' faces
 
 
 def check_equirect_size(name: str, width: int, height: int) -> None:
     """Refuse a panorama that is not 2:1 or smaller than 2 MIN_HEIGHT x MIN_HEIGHT, in one line."""
     if width != 2 * height:
-        raise InputRefused(f"{name} is {width}x{height}, not a 2:1 equirect panorama; fix: pass a full "
-                           f"360x180 equirect image (e.g. {2 * height}x{height}) or one with GPano crop metadata")
+        raise InputRefused(
+            f"{name} is {width}x{height}, not a 2:1 equirect panorama; fix: pass a full "
+            f"360x180 equirect image (e.g. {2 * height}x{height}) or one with GPano crop metadata"
+        )
     if height < MIN_HEIGHT:
-        raise InputRefused(f"{name} is {width}x{height}, too small for a panorama (at least "
-                           f"{2 * MIN_HEIGHT}x{MIN_HEIGHT}); fix: pass a larger image")
+        raise InputRefused(
+            f"{name} is {width}x{height}, too small for a panorama (at least "
+            f"{2 * MIN_HEIGHT}x{MIN_HEIGHT}); fix: pass a larger image"
+        )
 
 
 def check_exr(path: str | Path, equirect: bool = True) -> tuple[dict[str, np.ndarray] | None, dict, dict]:
@@ -129,8 +137,9 @@ def check_exr(path: str | Path, equirect: bool = True) -> tuple[dict[str, np.nda
     try:
         channels, attrs = read_exr(path)
     except ExrError as e:
-        raise InputRefused(f"{path.name} does not open as EXR ({e}); fix: pass an OpenEXR file "
-                           f"(e.g. oiiotool IN -o OUT.exr)") from None
+        raise InputRefused(
+            f"{path.name} does not open as EXR ({e}); fix: pass an OpenEXR file (e.g. oiiotool IN -o OUT.exr)"
+        ) from None
     if not channels:
         raise InputRefused(f"{path.name} has no channels; fix: pass an EXR with R, G, B (and Z)")
     if equirect:
@@ -147,15 +156,21 @@ def check_exr(path: str | Path, equirect: bool = True) -> tuple[dict[str, np.nda
     if "Z" in channels and (bad := depth_problems(channels["Z"])):
         what = describe(bad, channels["Z"].size)
         if not colour:
-            raise InputRefused(f"{path.name}: depth channel Z has {what}; depth must be > 0 metres or +inf "
-                               f"(sky); fix: mark unknown depth as +inf or pass the file without Z")
+            raise InputRefused(
+                f"{path.name}: depth channel Z has {what}; depth must be > 0 metres or +inf "
+                f"(sky); fix: mark unknown depth as +inf or pass the file without Z"
+            )
         del out["Z"]
-        facts["dropped"] = (f"Z: {what} (NaN, -inf, 0 and negative depths are not trusted: the depth "
-                            f"channel is dropped and depth is estimated from the picture)")
+        facts["dropped"] = (
+            f"Z: {what} (NaN, -inf, 0 and negative depths are not trusted: the depth "
+            f"channel is dropped and depth is estimated from the picture)"
+        )
     for name in sorted(set(channels) - set("RGBZ")):
         if not np.isfinite(channels[name]).all():
-            raise InputRefused(f"{path.name}: channel {name} has {int((~np.isfinite(channels[name])).sum())} "
-                               f"non-finite values; fix: pass the file without it or with finite values")
+            raise InputRefused(
+                f"{path.name}: channel {name} has {int((~np.isfinite(channels[name])).sum())} "
+                f"non-finite values; fix: pass the file without it or with finite values"
+            )
     return (out if facts else None), attrs, facts
 
 

@@ -19,6 +19,7 @@ seam). Then:
 ``k`` is about 1/16 of the width (at least 2 latent columns, rounded so that ``w + k`` is a
 multiple of 8): 8 latent columns = 64 px = 22.5 deg at 1024 px wide.
 """
+
 from __future__ import annotations
 
 import math
@@ -26,8 +27,7 @@ import math
 from holoflow.networks.common import report
 from holoflow.stage import Progress
 
-NEGATIVE_PROMPT = ("blur, worst quality, low quality, watermark, text, logo, username, seam, "
-                   "border, frame, collage")
+NEGATIVE_PROMPT = "blur, worst quality, low quality, watermark, text, logo, username, seam, border, frame, collage"
 SCHEDULERS = ("unipc", "euler_a", "model")
 
 
@@ -53,9 +53,9 @@ def blend_overlap(x, k: int):
     import torch
 
     w = x.shape[-1] - k
-    t = (torch.arange(k, device=x.device, dtype=torch.float32) + 0.5) / k          # [k]
+    t = (torch.arange(k, device=x.device, dtype=torch.float32) + 0.5) / k  # [k]
     t = t.to(x.dtype)
-    v = (1 - t) * x[..., w:] + t * x[..., :k]                                       # [B, C, h, k]
+    v = (1 - t) * x[..., w:] + t * x[..., :k]  # [B, C, h, k]
     x[..., :k] = v
     x[..., w:] = v
     return x
@@ -90,14 +90,14 @@ def decode_periodic(vae, latents, pad: int):
 
     w = latents.shape[-1]
     p = min(pad, w)
-    x = torch.cat([latents[..., w - p:], latents, latents[..., :p]], dim=-1)
+    x = torch.cat([latents[..., w - p :], latents, latents[..., :p]], dim=-1)
     x = x / vae.config.scaling_factor
     if getattr(vae.config, "shift_factor", None):
         x = x + vae.config.shift_factor
     with torch.inference_mode():
-        img = vae.decode(x.to(vae.dtype)).sample                                     # [B, 3, H, W + 2ps]
+        img = vae.decode(x.to(vae.dtype)).sample  # [B, 3, H, W + 2ps]
     s = img.shape[-1] // x.shape[-1]
-    return (img[..., p * s:(p + w) * s].float() / 2 + 0.5).clamp(0, 1)
+    return (img[..., p * s : (p + w) * s].float() / 2 + 0.5).clamp(0, 1)
 
 
 def latent_grid(width: int, height: int, vae_scale: int) -> tuple[int, int]:
@@ -136,8 +136,9 @@ def load_sd(kind: str, base, controlnet, device, scheduler: str = "unipc"):
 
     dlog.set_verbosity_error()
     dtype = torch.float16 if device.type == "cuda" else torch.float32
-    common = dict(safety_checker=None, feature_extractor=None, requires_safety_checker=False,
-                  dtype=dtype, local_files_only=True)
+    common = dict(
+        safety_checker=None, feature_extractor=None, requires_safety_checker=False, dtype=dtype, local_files_only=True
+    )
     if kind == "txt2img":
         pipe = StableDiffusionPipeline.from_pretrained(str(base), **common)
     else:

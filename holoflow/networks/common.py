@@ -4,6 +4,7 @@ holoflow.imageops.color).
 Engines take and return numpy float32 linear RGB ``[H, W, 3]`` in [0, 1]; networks see sRGB.
 Panoramas wrap in longitude: column W is column 0 (docs/engines.md).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -56,10 +57,10 @@ def _resample_matrix(n_in: int, n_out: int, wrap: bool, a: int = 3):
     import torch
 
     scale = n_in / n_out
-    support = a * max(scale, 1.0)                                         # input pixels
+    support = a * max(scale, 1.0)  # input pixels
     centre = (torch.arange(n_out, dtype=torch.float64) + 0.5) * scale - 0.5  # [n_out]
     taps = torch.arange(-int(np.ceil(support)) - 1, int(np.ceil(support)) + 2, dtype=torch.float64)
-    idx = torch.floor(centre)[:, None] + taps[None]                     # [n_out, T]
+    idx = torch.floor(centre)[:, None] + taps[None]  # [n_out, T]
     d = (idx - centre[:, None]) / max(scale, 1.0)
     w = torch.sinc(d) * torch.sinc(d / a) * (d.abs() < a)
     w = w / w.sum(1, keepdim=True).clamp_min(1e-12)
@@ -79,7 +80,7 @@ def resize_wrap(img, height: int, width: int):
     h, w = img.shape[-2:]
     if (h, w) == (height, width):
         return img
-    mx = _resample_matrix(w, width, wrap=True).to(img.device, torch.float32)    # [width, w]
+    mx = _resample_matrix(w, width, wrap=True).to(img.device, torch.float32)  # [width, w]
     my = _resample_matrix(h, height, wrap=False).to(img.device, torch.float32)  # [height, h]
-    out = torch.matmul(img.float(), mx.T)                                      # [..., C, h, width]
-    return torch.matmul(my, out).to(img.dtype)                                 # [..., C, height, width]
+    out = torch.matmul(img.float(), mx.T)  # [..., C, h, width]
+    return torch.matmul(my, out).to(img.dtype)  # [..., C, height, width]

@@ -6,6 +6,7 @@ style. Text-to-image with the lineart as control, with the same circular blendin
 the latent. Defaults: SD 1.5 (``stable-diffusion-v1-5/stable-diffusion-v1-5``) and
 ``lllyasviel/control_v11p_sd15_lineart``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -25,10 +26,24 @@ from holoflow.networks.weights import resolve
 from holoflow.stage import Progress
 
 
-def stylize(pano: np.ndarray, lineart: np.ndarray, prompt: str, width: int = 1536, height: int = 768,
-            steps: int = 20, strength: float = 1.0, seed: int = 0, model: str = "", controlnet: str = "",
-            device: str = "cpu", progress: Progress = None, *, guidance: float = 7.5,
-            negative_prompt: str = NEGATIVE_PROMPT, scheduler: str = "unipc") -> np.ndarray:
+def stylize(
+    pano: np.ndarray,
+    lineart: np.ndarray,
+    prompt: str,
+    width: int = 1536,
+    height: int = 768,
+    steps: int = 20,
+    strength: float = 1.0,
+    seed: int = 0,
+    model: str = "",
+    controlnet: str = "",
+    device: str = "cpu",
+    progress: Progress = None,
+    *,
+    guidance: float = 7.5,
+    negative_prompt: str = NEGATIVE_PROMPT,
+    scheduler: str = "unipc",
+) -> np.ndarray:
     """Stylized panorama, linear RGB ``[height, width, 3]`` in [0, 1].
 
     lineart: ``[H, W]`` in [0, 1], 1 = line (white lines on black, as ControlNet Lineart was
@@ -47,15 +62,24 @@ def stylize(pano: np.ndarray, lineart: np.ndarray, prompt: str, width: int = 153
     h, w = latent_grid(width, height, s)
     k = overlap_columns(w)
     line = torch.from_numpy(np.ascontiguousarray(lineart, np.float32))[None, None].clamp(0, 1)
-    line = resize_wrap(line, h * s, w * s).clamp(0, 1).expand(1, 3, h * s, w * s)        # [1, 3, H, W]
-    control = torch.cat([line, line[..., :k * s]], dim=-1).to(dev, pipe.unet.dtype)       # [1, 3, H, W + ks]
+    line = resize_wrap(line, h * s, w * s).clamp(0, 1).expand(1, 3, h * s, w * s)  # [1, 3, H, W]
+    control = torch.cat([line, line[..., : k * s]], dim=-1).to(dev, pipe.unet.dtype)  # [1, 3, H, W + ks]
     latents = initial_noise(seed, (1, pipe.unet.config.in_channels, h, w), k, dev, pipe.unet.dtype)
     with torch.inference_mode():
-        ext = pipe(prompt=prompt, negative_prompt=negative_prompt, image=control, height=h * s,
-                   width=(w + k) * s, num_inference_steps=steps, guidance_scale=guidance,
-                   controlnet_conditioning_scale=float(strength), latents=latents, output_type="latent",
-                   callback_on_step_end=step_callback(k, steps, progress),
-                   callback_on_step_end_tensor_inputs=["latents"]).images
+        ext = pipe(
+            prompt=prompt,
+            negative_prompt=negative_prompt,
+            image=control,
+            height=h * s,
+            width=(w + k) * s,
+            num_inference_steps=steps,
+            guidance_scale=guidance,
+            controlnet_conditioning_scale=float(strength),
+            latents=latents,
+            output_type="latent",
+            callback_on_step_end=step_callback(k, steps, progress),
+            callback_on_step_end_tensor_inputs=["latents"],
+        ).images
     img = decode_periodic(pipe.vae, ext[..., :w], pad=k)
     return srgb_to_linear(to_hwc(resize_wrap(img, height, width)), clip=True)
 
@@ -67,7 +91,19 @@ def stylize_engine(base: np.ndarray, prompt: str, cfg, seed: int, device: str, p
     from holoflow.imageops.resize import lanczos_resize
 
     base_lines = lineart(base)
-    out = stylize(base, base_lines, prompt, cfg.width, cfg.height, cfg.steps, cfg.strength, seed, cfg.model,
-                  cfg.controlnet, device, progress)
+    out = stylize(
+        base,
+        base_lines,
+        prompt,
+        cfg.width,
+        cfg.height,
+        cfg.steps,
+        cfg.strength,
+        seed,
+        cfg.model,
+        cfg.controlnet,
+        device,
+        progress,
+    )
     lines = lanczos_resize(base_lines, cfg.width, cfg.height).clip(0.0, 1.0)
     return out, lines, {}, {"model": cfg.model or "default", "controlnet": cfg.controlnet or "default"}

@@ -11,6 +11,7 @@ are feather-blended (linear ramps over the overlap) and accumulated modulo W. Ro
 spaced from the top to the bottom edge. Tile ``i`` (row-major) is denoised with seed ``seed + i``, alone
 or ``batch`` tiles per pipeline call.
 """
+
 from __future__ import annotations
 
 import math
@@ -51,10 +52,26 @@ def _ramp(n: int, overlap: int, lo: bool, hi: bool) -> np.ndarray:
     return np.maximum(r, 1e-3)
 
 
-def refine(pano: np.ndarray, prompt: str, width: int = 6144, height: int = 3072, strength: float = 0.5,
-           tile: int = 512, overlap: int = 64, steps: int = 20, seed: int = 0, model: str = "",
-           controlnet: str = "", device: str = "cpu", progress: Progress = None, *, batch: int = 1,
-           guidance: float = 7.5, negative_prompt: str = NEGATIVE_PROMPT, scheduler: str = "unipc") -> np.ndarray:
+def refine(
+    pano: np.ndarray,
+    prompt: str,
+    width: int = 6144,
+    height: int = 3072,
+    strength: float = 0.5,
+    tile: int = 512,
+    overlap: int = 64,
+    steps: int = 20,
+    seed: int = 0,
+    model: str = "",
+    controlnet: str = "",
+    device: str = "cpu",
+    progress: Progress = None,
+    *,
+    batch: int = 1,
+    guidance: float = 7.5,
+    negative_prompt: str = NEGATIVE_PROMPT,
+    scheduler: str = "unipc",
+) -> np.ndarray:
     """Refined panorama, linear RGB ``[height, width, 3]`` (the input is first resized to that).
 
     strength: img2img denoising strength in [0, 1] (0 returns the resized input); batch: tiles denoised
@@ -64,7 +81,7 @@ def refine(pano: np.ndarray, prompt: str, width: int = 6144, height: int = 3072,
 
     if not 0.0 <= strength <= 1.0:
         raise ValueError(f"strength must be in [0, 1], got {strength}")
-    img = resize_wrap(to_chw(linear_to_srgb(pano, clip=True), "cpu"), height, width)[0].clamp(0, 1)   # [3, H, W] sRGB
+    img = resize_wrap(to_chw(linear_to_srgb(pano, clip=True), "cpu"), height, width)[0].clamp(0, 1)  # [3, H, W] sRGB
     if strength == 0.0 or int(steps * strength) < 1:
         return srgb_to_linear(img.permute(1, 2, 0).numpy(), clip=True)
     base = resolve(model, "tile_base", "detail.model")
@@ -72,27 +89,37 @@ def refine(pano: np.ndarray, prompt: str, width: int = 6144, height: int = 3072,
     dev = torch_device(device)
     pipe = load_sd("controlnet_img2img", base, cnet, dev, scheduler)
     xs, ys, tw, th = tile_grid(width, height, tile, overlap)
-    acc = np.zeros((3, height, width + tw), np.float64)                     # unwrapped, folded at the end
+    acc = np.zeros((3, height, width + tw), np.float64)  # unwrapped, folded at the end
     wsum = np.zeros((height, width + tw), np.float64)
-    wrapped = torch.cat([img, img[..., :tw]], dim=-1)                        # [3, H, W + tw]
+    wrapped = torch.cat([img, img[..., :tw]], dim=-1)  # [3, H, W + tw]
     tiles = [(ty, y0, x0) for ty, y0 in enumerate(ys) for x0 in xs]  # tile i = tiles[i], seed + i
     n = len(tiles)
     wx = _ramp(tw, overlap, lo=True, hi=True)
     for start in range(0, n, batch):
         report(progress, start, n, "tiles")
         group = range(start, min(start + batch, n))
-        crops = torch.cat([wrapped[None, :, tiles[i][1]:tiles[i][1] + th, tiles[i][2]:tiles[i][2] + tw]
-                           for i in group]).to(dev, pipe.unet.dtype)     # [b, 3, th, tw]
+        crops = torch.cat(
+            [wrapped[None, :, tiles[i][1] : tiles[i][1] + th, tiles[i][2] : tiles[i][2] + tw] for i in group]
+        ).to(dev, pipe.unet.dtype)  # [b, 3, th, tw]
         with torch.inference_mode():
-            out = pipe(prompt=[prompt] * len(group), negative_prompt=[negative_prompt] * len(group), image=crops,
-                       control_image=crops, height=th, width=tw, strength=float(strength),
-                       num_inference_steps=steps, guidance_scale=guidance, output_type="pt",
-                       generator=[torch.Generator("cpu").manual_seed(seed + i) for i in group]).images
-        for k, i in enumerate(group):                                    # out [b, 3, th, tw] in [0, 1]
+            out = pipe(
+                prompt=[prompt] * len(group),
+                negative_prompt=[negative_prompt] * len(group),
+                image=crops,
+                control_image=crops,
+                height=th,
+                width=tw,
+                strength=float(strength),
+                num_inference_steps=steps,
+                guidance_scale=guidance,
+                output_type="pt",
+                generator=[torch.Generator("cpu").manual_seed(seed + i) for i in group],
+            ).images
+        for k, i in enumerate(group):  # out [b, 3, th, tw] in [0, 1]
             ty, y0, x0 = tiles[i]
             wt = _ramp(th, overlap, lo=ty > 0, hi=ty < len(ys) - 1)[:, None] * wx[None, :]
-            acc[:, y0:y0 + th, x0:x0 + tw] += out[k].float().cpu().numpy() * wt
-            wsum[y0:y0 + th, x0:x0 + tw] += wt
+            acc[:, y0 : y0 + th, x0 : x0 + tw] += out[k].float().cpu().numpy() * wt
+            wsum[y0 : y0 + th, x0 : x0 + tw] += wt
     acc[:, :, :tw] += acc[:, :, width:]
     wsum[:, :tw] += wsum[:, width:]
     out = (acc[:, :, :width] / np.maximum(wsum[:, :width], 1e-12)).astype(np.float32)
@@ -102,6 +129,20 @@ def refine(pano: np.ndarray, prompt: str, width: int = 6144, height: int = 3072,
 
 def detail_engine(pano: np.ndarray, prompt: str, cfg, seed: int, device: str, progress: Progress):
     """detail's ``controlnet_tile`` engine (holoflow.imageops.config.DetailParams): (pano, meta)."""
-    out = refine(pano, prompt, cfg.width, cfg.height, cfg.strength, cfg.tile, cfg.overlap, cfg.steps, seed,
-                 cfg.model, cfg.controlnet, device, progress, batch=cfg.batch)
+    out = refine(
+        pano,
+        prompt,
+        cfg.width,
+        cfg.height,
+        cfg.strength,
+        cfg.tile,
+        cfg.overlap,
+        cfg.steps,
+        seed,
+        cfg.model,
+        cfg.controlnet,
+        device,
+        progress,
+        batch=cfg.batch,
+    )
     return out, {"model": cfg.model or "default", "controlnet": cfg.controlnet or "default"}

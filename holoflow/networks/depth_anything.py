@@ -8,6 +8,7 @@ predicts affine-invariant disparity (larger = nearer); it is
 resized back to each input's size, bilinearly. The scale and shift are unknown per image: the
 tangent_depth alignment solves for them.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,8 +33,14 @@ def network_side(size: int) -> int:
     return max(PATCH, int(round(size / PATCH)) * PATCH)
 
 
-def relative_disparity(images: np.ndarray, model: str = "", device: str = "cpu",
-                       progress: Progress = None, batch: int = 4, side: int | None = None) -> np.ndarray:
+def relative_disparity(
+    images: np.ndarray,
+    model: str = "",
+    device: str = "cpu",
+    progress: Progress = None,
+    batch: int = 4,
+    side: int | None = None,
+) -> np.ndarray:
     """Affine-invariant disparity ``[N, H, W]`` float32 of linear RGB ``images [N, H, W, 3]``.
 
     ``side``: a square face is resized to ``side`` x ``side`` px for the network (a multiple of 14, the
@@ -53,10 +60,10 @@ def relative_disparity(images: np.ndarray, model: str = "", device: str = "cpu",
     out = np.empty((n, h, w), np.float32)
     for i in range(0, n, batch):
         report(progress, i, n, "images")
-        inputs = processor(images=list(imgs[i:i + batch]), return_tensors="pt", **size)
+        inputs = processor(images=list(imgs[i : i + batch]), return_tensors="pt", **size)
         with torch.inference_mode():
-            disp = net(pixel_values=inputs["pixel_values"].to(dev)).predicted_depth   # [B, h', w']
+            disp = net(pixel_values=inputs["pixel_values"].to(dev)).predicted_depth  # [B, h', w']
             disp = F.interpolate(disp[:, None].float(), size=(h, w), mode="bilinear", align_corners=False)
-        out[i:i + batch] = disp[:, 0].cpu().numpy()
+        out[i : i + batch] = disp[:, 0].cpu().numpy()
     report(progress, n, n, "images")
     return out

@@ -5,6 +5,7 @@ Any StableDiffusionPipeline-compatible folder works; the default is the Diffusio
 trigger token ``<360panorama>``). Circular blending (holoflow/networks/circular.py) runs after every
 denoising step, so the panorama is seamless at +-180 deg.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,10 +27,21 @@ from holoflow.stage import Progress
 TRIGGER = "<360panorama>, "
 
 
-def generate_pano(prompt: str, width: int = 1024, height: int = 512, steps: int = 30, guidance: float = 7.5,
-                  seed: int = 0, model: str = "", device: str = "cpu", progress: Progress = None, *,
-                  negative_prompt: str = NEGATIVE_PROMPT, trigger: str = TRIGGER,
-                  scheduler: str = "unipc") -> np.ndarray:
+def generate_pano(
+    prompt: str,
+    width: int = 1024,
+    height: int = 512,
+    steps: int = 30,
+    guidance: float = 7.5,
+    seed: int = 0,
+    model: str = "",
+    device: str = "cpu",
+    progress: Progress = None,
+    *,
+    negative_prompt: str = NEGATIVE_PROMPT,
+    trigger: str = TRIGGER,
+    scheduler: str = "unipc",
+) -> np.ndarray:
     """Equirectangular panorama for ``prompt``: linear RGB ``[height, width, 3]`` in [0, 1].
 
     steps: denoising steps; guidance: classifier-free guidance scale; seed: initial noise.
@@ -44,11 +56,19 @@ def generate_pano(prompt: str, width: int = 1024, height: int = 512, steps: int 
     k = overlap_columns(w)
     latents = initial_noise(seed, (1, pipe.unet.config.in_channels, h, w), k, dev, pipe.unet.dtype)
     with torch.inference_mode():
-        ext = pipe(prompt=trigger + prompt, negative_prompt=negative_prompt, height=h * s, width=(w + k) * s,
-                   num_inference_steps=steps, guidance_scale=guidance, latents=latents, output_type="latent",
-                   callback_on_step_end=step_callback(k, steps, progress),
-                   callback_on_step_end_tensor_inputs=["latents"]).images            # [1, C, h, w + k]
-    img = decode_periodic(pipe.vae, ext[..., :w], pad=k)                            # [1, 3, h*s, w*s]
+        ext = pipe(
+            prompt=trigger + prompt,
+            negative_prompt=negative_prompt,
+            height=h * s,
+            width=(w + k) * s,
+            num_inference_steps=steps,
+            guidance_scale=guidance,
+            latents=latents,
+            output_type="latent",
+            callback_on_step_end=step_callback(k, steps, progress),
+            callback_on_step_end_tensor_inputs=["latents"],
+        ).images  # [1, C, h, w + k]
+    img = decode_periodic(pipe.vae, ext[..., :w], pad=k)  # [1, 3, h*s, w*s]
     return srgb_to_linear(to_hwc(resize_wrap(img, height, width)), clip=True)
 
 

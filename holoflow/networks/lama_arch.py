@@ -1,6 +1,7 @@
 """LaMa's generator (big-lama): fast Fourier convolutions (FFC) in a ResNet, as nn.Modules whose
 parameter names match the release's state dict. Imports torch: holoflow/networks/lama.py loads this
 module only when a model is built."""
+
 from __future__ import annotations
 
 import torch
@@ -16,14 +17,13 @@ class FourierUnit(nn.Module):
         self.bn = nn.BatchNorm2d(out_ch * 2)
         self.relu = nn.ReLU(inplace=True)
 
-    def forward(self, x):                                           # [B, C, H, W]
+    def forward(self, x):  # [B, C, H, W]
         b, _, h, w = x.shape
         f = torch.fft.rfftn(x.float(), dim=(-2, -1), norm="ortho")  # [B, C, H, W//2+1]
         f = torch.stack((f.real, f.imag), dim=2).reshape(b, -1, h, f.shape[-1]).to(x.dtype)
-        f = self.relu(self.bn(self.conv_layer(f)))                  # [B, 2C', H, W//2+1]
+        f = self.relu(self.bn(self.conv_layer(f)))  # [B, 2C', H, W//2+1]
         f = f.reshape(b, -1, 2, h, f.shape[-1]).float()
-        return torch.fft.irfftn(torch.complex(f[:, :, 0], f[:, :, 1]), s=(h, w), dim=(-2, -1),
-                                norm="ortho").to(x.dtype)
+        return torch.fft.irfftn(torch.complex(f[:, :, 0], f[:, :, 1]), s=(h, w), dim=(-2, -1), norm="ortho").to(x.dtype)
 
 
 class SpectralTransform(nn.Module):
@@ -31,8 +31,9 @@ class SpectralTransform(nn.Module):
 
     def __init__(self, in_ch: int, out_ch: int):
         super().__init__()
-        self.conv1 = nn.Sequential(nn.Conv2d(in_ch, out_ch // 2, 1, bias=False),
-                                   nn.BatchNorm2d(out_ch // 2), nn.ReLU(inplace=True))
+        self.conv1 = nn.Sequential(
+            nn.Conv2d(in_ch, out_ch // 2, 1, bias=False), nn.BatchNorm2d(out_ch // 2), nn.ReLU(inplace=True)
+        )
         self.fu = FourierUnit(out_ch // 2, out_ch // 2)
         self.conv2 = nn.Conv2d(out_ch // 2, out_ch, 1, bias=False)
 
@@ -119,15 +120,18 @@ class FFCResNetGenerator(nn.Module):
         super().__init__()
         layers: list = [nn.ReflectionPad2d(3), FFC_BN_ACT(in_ch, ngf, 7, 0, 0)]
         for i in range(n_down):
-            c_in, c_out = min(max_feat, ngf * 2 ** i), min(max_feat, ngf * 2 ** (i + 1))
+            c_in, c_out = min(max_feat, ngf * 2**i), min(max_feat, ngf * 2 ** (i + 1))
             layers.append(FFC_BN_ACT(c_in, c_out, 3, 0, ratio if i == n_down - 1 else 0, stride=2, padding=1))
-        dim = min(max_feat, ngf * 2 ** n_down)
+        dim = min(max_feat, ngf * 2**n_down)
         layers += [FFCResnetBlock(dim, ratio) for _ in range(n_blocks)]
         layers.append(ConcatTuple())
         for i in range(n_down):
             c_in, c_out = min(max_feat, ngf * 2 ** (n_down - i)), min(max_feat, ngf * 2 ** (n_down - i - 1))
-            layers += [nn.ConvTranspose2d(c_in, c_out, 3, stride=2, padding=1, output_padding=1),
-                       nn.BatchNorm2d(c_out), nn.ReLU(True)]
+            layers += [
+                nn.ConvTranspose2d(c_in, c_out, 3, stride=2, padding=1, output_padding=1),
+                nn.BatchNorm2d(c_out),
+                nn.ReLU(True),
+            ]
         layers += [nn.ReflectionPad2d(3), nn.Conv2d(ngf, out_ch, 7), nn.Sigmoid()]
         self.model = nn.Sequential(*layers)
         self.n_down = n_down

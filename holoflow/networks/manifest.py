@@ -16,6 +16,7 @@ arrive, and ``auto`` runs the network. Such a model is optional: missing, ``auto
 Only ``pull`` downloads (huggingface_hub's ``snapshot_download`` into the user's cache); nothing heavy
 is imported until a model is written or looked up.
 """
+
 from __future__ import annotations
 
 import json
@@ -30,9 +31,14 @@ MANIFEST = "manifest.json"
 
 # role -> the file or folder name ``models random`` writes for it (roles sharing an architecture share one).
 RANDOM_LAYOUT: dict[str, str] = {
-    "diffusion360": "sd", "sd15": "sd", "tile_base": "sd",
-    "controlnet_lineart": "controlnet", "controlnet_tile": "controlnet",
-    "realesrgan": "RealESRGAN_x2plus.pth", "depth_anything": "depth_anything", "zoedepth": "zoedepth",
+    "diffusion360": "sd",
+    "sd15": "sd",
+    "tile_base": "sd",
+    "controlnet_lineart": "controlnet",
+    "controlnet_tile": "controlnet",
+    "realesrgan": "RealESRGAN_x2plus.pth",
+    "depth_anything": "depth_anything",
+    "zoedepth": "zoedepth",
     "lama": "big-lama.safetensors",
 }
 
@@ -43,13 +49,13 @@ class ModelNeed:
 
     stage: str
     engine: str
-    param: str            # the stage param that names it (``stage.param``)
-    role: str             # weights.DEFAULTS key
-    model: str            # what the engine will be given: a path, an HF id, or "" (its default)
+    param: str  # the stage param that names it (``stage.param``)
+    role: str  # weights.DEFAULTS key
+    model: str  # what the engine will be given: a path, an HF id, or "" (its default)
     present: bool
-    detail: str           # the local path when present, else the one line saying how to get it
+    detail: str  # the local path when present, else the one line saying how to get it
     optional: bool = False  # an ``auto`` engine's network: when missing, auto runs another engine
-    about: str = ""       # name, parameters and licence of a known model (weights.KNOWN)
+    about: str = ""  # name, parameters and licence of a known model (weights.KNOWN)
 
 
 def engine_weights(r: "Resolved") -> tuple[tuple[str, str], ...]:
@@ -86,11 +92,24 @@ def needs(resolved: dict[str, "Resolved"], optional: bool = False) -> list[Model
             except MissingWeights as e:
                 path, present = str(e), False
             if maybe and not present:
-                path = (f"auto runs another engine without it; get it with `holoflow models pull {DEFAULTS[role]}` "
-                        f"(or set {name}.{param}=/a/folder)")
+                path = (
+                    f"auto runs another engine without it; get it with `holoflow models pull {DEFAULTS[role]}` "
+                    f"(or set {name}.{param}=/a/folder)"
+                )
             engine = f"{r.engine} -> {auto[2]}" if auto is not None and param == auto[0] else r.engine
-            out.append(ModelNeed(name, engine, param, role, model or DEFAULTS.get(role, ""), present, path,
-                                 maybe, describe(model or DEFAULTS.get(role, ""))))
+            out.append(
+                ModelNeed(
+                    name,
+                    engine,
+                    param,
+                    role,
+                    model or DEFAULTS.get(role, ""),
+                    present,
+                    path,
+                    maybe,
+                    describe(model or DEFAULTS.get(role, "")),
+                )
+            )
     return out
 
 
@@ -119,9 +138,11 @@ def check_present(resolved: dict[str, "Resolved"], profile: str | None) -> None:
     if missing:
         names = ", ".join(f"{m.stage}.{m.param} ({m.model or m.role})" for m in missing[:3])
         more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
-        raise PipelineError(f"{len(missing)} model(s) not found locally: {names}{more}; fix: "
-                            f"`holoflow models list --profile {profile}` says where each comes from "
-                            f"(or `holoflow models random DIR` + --models DIR for random weights)")
+        raise PipelineError(
+            f"{len(missing)} model(s) not found locally: {names}{more}; fix: "
+            f"`holoflow models list --profile {profile}` says where each comes from "
+            f"(or `holoflow models random DIR` + --models DIR for random weights)"
+        )
 
 
 def prepare(items, models: str | None) -> None:
@@ -141,9 +162,15 @@ def prepare(items, models: str | None) -> None:
                 raise PipelineError(f"scene {item.label}: {e}" if item.label else str(e)) from None
         fill_auto(ctx.resolved)
         selected, needed, _ = select(ctx.pipe, item.opts, ctx.uses)
-        wanted = {n: r for n, r in ctx.resolved.items() if n in needed and n in selected and n not in ctx.uses
-                  and r.stage.config is not None
-                  and (r.engine in r.stage.config.ENGINES.weights or auto_network(r) is not None)}
+        wanted = {
+            n: r
+            for n, r in ctx.resolved.items()
+            if n in needed
+            and n in selected
+            and n not in ctx.uses
+            and r.stage.config is not None
+            and (r.engine in r.stage.config.ENGINES.weights or auto_network(r) is not None)
+        }
         if wanted:
             check_present(wanted, ctx.profile)
 
@@ -154,13 +181,15 @@ def read_manifest(folder: Path) -> dict[str, Path]:
     try:
         doc = json.loads(file.read_text())
     except FileNotFoundError:
-        raise ValueError(f"--models {folder}: no {MANIFEST} there; fix: `holoflow models random {folder}`, "
-                         f"or write one: {{\"format\": 1, \"roles\": {{ROLE: PATH}}}}") from None
+        raise ValueError(
+            f"--models {folder}: no {MANIFEST} there; fix: `holoflow models random {folder}`, "
+            f'or write one: {{"format": 1, "roles": {{ROLE: PATH}}}}'
+        ) from None
     except json.JSONDecodeError as e:
         raise ValueError(f"--models {folder}: {MANIFEST} is not JSON ({e.msg}, line {e.lineno})") from None
     roles = doc.get("roles") if isinstance(doc, dict) else None
     if not isinstance(roles, dict) or doc.get("format") != 1:
-        raise ValueError(f"--models {folder}: {MANIFEST} needs {{\"format\": 1, \"roles\": {{ROLE: PATH}}}}")
+        raise ValueError(f'--models {folder}: {MANIFEST} needs {{"format": 1, "roles": {{ROLE: PATH}}}}')
     from .weights import DEFAULTS
 
     out = {}
@@ -185,21 +214,24 @@ def apply_manifest(resolved: dict[str, "Resolved"], folder: Path) -> None:
         raise PipelineError(str(e)) from None
     for name, r in resolved.items():
         auto = auto_network(r)
-        if auto is not None and not r.params[auto[0]] and auto[1] in roles:   # optional: only when DIR has it
+        if auto is not None and not r.params[auto[0]] and auto[1] in roles:  # optional: only when DIR has it
             r.params[auto[0]] = str(roles[auto[1]])
             r.overrides[auto[0]] = "--models"
         for param, role in engine_weights(r):
             if r.params[param]:
                 continue
             if role not in roles:
-                raise PipelineError(f"--models {folder}: {MANIFEST} has no '{role}' (needed by {name}.{param}, "
-                                    f"engine {r.engine}); fix: add it, or --set {name}.{param}=PATH")
+                raise PipelineError(
+                    f"--models {folder}: {MANIFEST} has no '{role}' (needed by {name}.{param}, "
+                    f"engine {r.engine}); fix: add it, or --set {name}.{param}=PATH"
+                )
             r.params[param] = str(roles[role])
             r.overrides[param] = "--models"
 
 
-def write_random(folder: Path, full: bool = False, seed: int = 0, progress=print, roles=None,
-                 depth_variant: str = "small") -> dict[str, str]:
+def write_random(
+    folder: Path, full: bool = False, seed: int = 0, progress=print, roles=None, depth_variant: str = "small"
+) -> dict[str, str]:
     """Randomly initialised models of every real architecture (tiny, or ``full`` published sizes), or of
     ``roles`` only, and their manifest.json into ``folder``. ``depth_variant``: the Depth Anything
     architecture at full size ("small": V2 Small, the default model; "large"). Returns the manifest's roles."""
@@ -224,8 +256,9 @@ def write_random(folder: Path, full: bool = False, seed: int = 0, progress=print
         if name in names:
             progress(f"holoflow models: writing {name} ({'full size' if full else 'tiny'}, random weights)")
             write(folder / name)
-    (folder / MANIFEST).write_text(json.dumps({"format": 1, "kind": "random", "full": full, "seed": seed,
-                                               "roles": chosen}, indent=1) + "\n")
+    (folder / MANIFEST).write_text(
+        json.dumps({"format": 1, "kind": "random", "full": full, "seed": seed, "roles": chosen}, indent=1) + "\n"
+    )
     return chosen
 
 
@@ -268,15 +301,20 @@ def pull_targets(names: list[str], resolved: dict[str, "Resolved"] | None) -> tu
     local path or has no HF repo (lama) is skipped with its line."""
     from .weights import DEFAULTS, _is_pathlike
 
-    wanted = [(n.role, n.model) for n in needs(resolved, optional=True)] if resolved is not None else \
-        [(name, DEFAULTS[name] if name in DEFAULTS else name) for name in names]
+    wanted = (
+        [(n.role, n.model) for n in needs(resolved, optional=True)]
+        if resolved is not None
+        else [(name, DEFAULTS[name] if name in DEFAULTS else name) for name in names]
+    )
     out, skipped = [], []
     for name, model in wanted:
         if not model or _is_pathlike(model) or Path(model).expanduser().exists() or model.count("/") < 1:
             what = f"{name} ({model})" if model else f"{name} (no Hugging Face repo; see docs/engines.md)"
             if resolved is None:
-                raise PullError(f"holoflow models pull: {what} is not a Hugging Face model id; roles: "
-                                f"{', '.join(r for r in DEFAULTS if DEFAULTS[r])}, or owner/repo")
+                raise PullError(
+                    f"holoflow models pull: {what} is not a Hugging Face model id; roles: "
+                    f"{', '.join(r for r in DEFAULTS if DEFAULTS[r])}, or owner/repo"
+                )
             skipped.append(f"holoflow models: skipping {what}: a local file or folder, not fetched")
         elif model not in out:
             out.append(model)
@@ -296,14 +334,19 @@ def pull(models: list[str], progress=print) -> list[Path]:
         parts = model.split("/")
         repo, sub = "/".join(parts[:2]), "/".join(parts[2:])
         about = describe(repo)
-        progress(f"holoflow models: fetching {repo}{'/' + sub if sub else ''}" + (f" ({about})" if about else "")
-                 + f" into {_cache_dir()}")
+        progress(
+            f"holoflow models: fetching {repo}{'/' + sub if sub else ''}"
+            + (f" ({about})" if about else "")
+            + f" into {_cache_dir()}"
+        )
         try:
             root = Path(snapshot_download(repo, allow_patterns=[sub, f"{sub}/*"] if sub else None))
         except _offline_errors() as e:
-            raise PullError(f"holoflow models pull: cannot reach the Hugging Face Hub for {repo} (offline: "
-                            f"{type(e).__name__}); run it again with a network (a partial download resumes), or "
-                            f"copy the model folder here and set its stage's model=/that/folder") from None
+            raise PullError(
+                f"holoflow models pull: cannot reach the Hugging Face Hub for {repo} (offline: "
+                f"{type(e).__name__}); run it again with a network (a partial download resumes), or "
+                f"copy the model folder here and set its stage's model=/that/folder"
+            ) from None
         out.append(root / sub if sub else root)
     return out
 
@@ -313,8 +356,12 @@ def _offline_errors() -> tuple[type[BaseException], ...]:
     errors too, where that client is importable)."""
     from huggingface_hub.errors import LocalEntryNotFoundError, OfflineModeIsEnabled
 
-    errors: tuple[type[BaseException], ...] = (LocalEntryNotFoundError, OfflineModeIsEnabled, ConnectionError,
-                                                TimeoutError)
+    errors: tuple[type[BaseException], ...] = (
+        LocalEntryNotFoundError,
+        OfflineModeIsEnabled,
+        ConnectionError,
+        TimeoutError,
+    )
     for client in ("httpx2", "httpx"):
         try:
             errors += (__import__(client).TransportError,)

@@ -8,6 +8,7 @@ own loading code (``from_pretrained`` from the folder, or its state-dict loader)
 user's download. The outputs of random models are meaningless images; only shapes, ranges, seams,
 determinism and timings are checked with them.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -49,28 +50,74 @@ def save_sd(folder: Path, full: bool = False, seed: int = 0) -> Path:
     vocab, merges = tokenizer_vocab()
     tokenizer = CLIPTokenizer(vocab=vocab, merges=merges, model_max_length=77)
     hidden = 768 if full else 16
-    text = CLIPTextModel(CLIPTextConfig(
-        vocab_size=len(vocab), hidden_size=hidden, intermediate_size=4 * hidden, projection_dim=hidden,
-        num_attention_heads=12 if full else 2, num_hidden_layers=12 if full else 2, max_position_embeddings=77,
-        bos_token_id=vocab["<|startoftext|>"], eos_token_id=vocab["<|endoftext|>"], pad_token_id=vocab["<|endoftext|>"]))
+    text = CLIPTextModel(
+        CLIPTextConfig(
+            vocab_size=len(vocab),
+            hidden_size=hidden,
+            intermediate_size=4 * hidden,
+            projection_dim=hidden,
+            num_attention_heads=12 if full else 2,
+            num_hidden_layers=12 if full else 2,
+            max_position_embeddings=77,
+            bos_token_id=vocab["<|startoftext|>"],
+            eos_token_id=vocab["<|endoftext|>"],
+            pad_token_id=vocab["<|endoftext|>"],
+        )
+    )
     if full:
-        unet = UNet2DConditionModel(sample_size=64, layers_per_block=2, block_out_channels=(320, 640, 1280, 1280),
-                                    cross_attention_dim=768, attention_head_dim=8)
-        vae = AutoencoderKL(block_out_channels=(128, 256, 512, 512), layers_per_block=2, latent_channels=4,
-                            sample_size=512, down_block_types=("DownEncoderBlock2D",) * 4,
-                            up_block_types=("UpDecoderBlock2D",) * 4)
+        unet = UNet2DConditionModel(
+            sample_size=64,
+            layers_per_block=2,
+            block_out_channels=(320, 640, 1280, 1280),
+            cross_attention_dim=768,
+            attention_head_dim=8,
+        )
+        vae = AutoencoderKL(
+            block_out_channels=(128, 256, 512, 512),
+            layers_per_block=2,
+            latent_channels=4,
+            sample_size=512,
+            down_block_types=("DownEncoderBlock2D",) * 4,
+            up_block_types=("UpDecoderBlock2D",) * 4,
+        )
     else:
-        unet = UNet2DConditionModel(sample_size=16, layers_per_block=1, block_out_channels=(8, 16), norm_num_groups=4,
-                                    cross_attention_dim=16, attention_head_dim=2,
-                                    down_block_types=("CrossAttnDownBlock2D", "DownBlock2D"),
-                                    up_block_types=("UpBlock2D", "CrossAttnUpBlock2D"))
-        vae = AutoencoderKL(block_out_channels=(8, 16), norm_num_groups=4, layers_per_block=1, latent_channels=4,
-                            sample_size=32, down_block_types=("DownEncoderBlock2D",) * 2,
-                            up_block_types=("UpDecoderBlock2D",) * 2)
-    sched = PNDMScheduler(beta_start=0.00085, beta_end=0.012, beta_schedule="scaled_linear",
-                          skip_prk_steps=True, set_alpha_to_one=False, steps_offset=1)
-    pipe = StableDiffusionPipeline(vae=vae, text_encoder=text, tokenizer=tokenizer, unet=unet, scheduler=sched,
-                                   safety_checker=None, feature_extractor=None, requires_safety_checker=False)
+        unet = UNet2DConditionModel(
+            sample_size=16,
+            layers_per_block=1,
+            block_out_channels=(8, 16),
+            norm_num_groups=4,
+            cross_attention_dim=16,
+            attention_head_dim=2,
+            down_block_types=("CrossAttnDownBlock2D", "DownBlock2D"),
+            up_block_types=("UpBlock2D", "CrossAttnUpBlock2D"),
+        )
+        vae = AutoencoderKL(
+            block_out_channels=(8, 16),
+            norm_num_groups=4,
+            layers_per_block=1,
+            latent_channels=4,
+            sample_size=32,
+            down_block_types=("DownEncoderBlock2D",) * 2,
+            up_block_types=("UpDecoderBlock2D",) * 2,
+        )
+    sched = PNDMScheduler(
+        beta_start=0.00085,
+        beta_end=0.012,
+        beta_schedule="scaled_linear",
+        skip_prk_steps=True,
+        set_alpha_to_one=False,
+        steps_offset=1,
+    )
+    pipe = StableDiffusionPipeline(
+        vae=vae,
+        text_encoder=text,
+        tokenizer=tokenizer,
+        unet=unet,
+        scheduler=sched,
+        safety_checker=None,
+        feature_extractor=None,
+        requires_safety_checker=False,
+    )
     pipe.save_pretrained(str(folder))
     return folder
 
@@ -98,8 +145,11 @@ def save_rrdbnet(path: Path, scale: int = 4, full: bool = False, seed: int = 0) 
     from holoflow.networks.realesrgan import rrdbnet_class
 
     torch.manual_seed(seed)
-    net = rrdbnet_class()(scale=scale, num_feat=64, num_block=23, num_grow_ch=32) if full else \
-        rrdbnet_class()(scale=scale, num_feat=8, num_block=1, num_grow_ch=4)
+    net = (
+        rrdbnet_class()(scale=scale, num_feat=64, num_block=23, num_grow_ch=32)
+        if full
+        else rrdbnet_class()(scale=scale, num_feat=8, num_block=1, num_grow_ch=4)
+    )
     torch.save({"params_ema": net.state_dict()}, str(path))
     return path
 
@@ -125,35 +175,76 @@ def save_depth_anything(folder: Path, full: bool = False, seed: int = 0, variant
     from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config, DPTImageProcessorPil
 
     torch.manual_seed(seed)
-    if full and variant == "large":   # ViT-L/14, features from layers 5, 12, 18, 24
-        backbone = Dinov2Config(hidden_size=1024, num_hidden_layers=24, num_attention_heads=16, intermediate_size=4096,
-                                image_size=518, patch_size=14, reshape_hidden_states=False,
-                                out_features=["stage5", "stage12", "stage18", "stage24"])
-        cfg = DepthAnythingConfig(backbone_config=backbone, reassemble_hidden_size=1024, fusion_hidden_size=256,
-                                  neck_hidden_sizes=[256, 512, 1024, 1024], head_hidden_size=32)
+    if full and variant == "large":  # ViT-L/14, features from layers 5, 12, 18, 24
+        backbone = Dinov2Config(
+            hidden_size=1024,
+            num_hidden_layers=24,
+            num_attention_heads=16,
+            intermediate_size=4096,
+            image_size=518,
+            patch_size=14,
+            reshape_hidden_states=False,
+            out_features=["stage5", "stage12", "stage18", "stage24"],
+        )
+        cfg = DepthAnythingConfig(
+            backbone_config=backbone,
+            reassemble_hidden_size=1024,
+            fusion_hidden_size=256,
+            neck_hidden_sizes=[256, 512, 1024, 1024],
+            head_hidden_size=32,
+        )
         side = 518
     elif full and variant == "small":  # V2 Small: ViT-S/14, features from layers 3, 6, 9, 12
-        backbone = Dinov2Config(hidden_size=384, num_hidden_layers=12, num_attention_heads=6, intermediate_size=1536,
-                                image_size=518, patch_size=14, reshape_hidden_states=False,
-                                out_features=["stage3", "stage6", "stage9", "stage12"])
-        cfg = DepthAnythingConfig(backbone_config=backbone, reassemble_hidden_size=384, fusion_hidden_size=64,
-                                  neck_hidden_sizes=[48, 96, 192, 384], head_hidden_size=32)
+        backbone = Dinov2Config(
+            hidden_size=384,
+            num_hidden_layers=12,
+            num_attention_heads=6,
+            intermediate_size=1536,
+            image_size=518,
+            patch_size=14,
+            reshape_hidden_states=False,
+            out_features=["stage3", "stage6", "stage9", "stage12"],
+        )
+        cfg = DepthAnythingConfig(
+            backbone_config=backbone,
+            reassemble_hidden_size=384,
+            fusion_hidden_size=64,
+            neck_hidden_sizes=[48, 96, 192, 384],
+            head_hidden_size=32,
+        )
         side = 518
     elif full:
         raise ValueError(f"unknown Depth Anything variant {variant!r}; use small or large")
     else:
-        backbone = Dinov2Config(hidden_size=16, num_hidden_layers=4, num_attention_heads=2, intermediate_size=32,
-                                image_size=56, patch_size=14, reshape_hidden_states=False,
-                                out_features=["stage1", "stage2", "stage3", "stage4"])
-        cfg = DepthAnythingConfig(backbone_config=backbone, reassemble_hidden_size=16, neck_hidden_sizes=[8, 8, 16, 16],
-                                  fusion_hidden_size=8, head_hidden_size=8)
+        backbone = Dinov2Config(
+            hidden_size=16,
+            num_hidden_layers=4,
+            num_attention_heads=2,
+            intermediate_size=32,
+            image_size=56,
+            patch_size=14,
+            reshape_hidden_states=False,
+            out_features=["stage1", "stage2", "stage3", "stage4"],
+        )
+        cfg = DepthAnythingConfig(
+            backbone_config=backbone,
+            reassemble_hidden_size=16,
+            neck_hidden_sizes=[8, 8, 16, 16],
+            fusion_hidden_size=8,
+            head_hidden_size=8,
+        )
         side = 56
     net = DepthAnythingForDepthEstimation(cfg)
     with torch.no_grad():
-        net.head.conv3.bias.fill_(0.5)          # random init + the final ReLU would give all-zero disparity
+        net.head.conv3.bias.fill_(0.5)  # random init + the final ReLU would give all-zero disparity
     net.save_pretrained(str(folder))
-    DPTImageProcessorPil(size={"height": side, "width": side}, keep_aspect_ratio=True, ensure_multiple_of=14,
-                         image_mean=[0.485, 0.456, 0.406], image_std=[0.229, 0.224, 0.225]).save_pretrained(str(folder))
+    DPTImageProcessorPil(
+        size={"height": side, "width": side},
+        keep_aspect_ratio=True,
+        ensure_multiple_of=14,
+        image_mean=[0.485, 0.456, 0.406],
+        image_std=[0.229, 0.224, 0.225],
+    ).save_pretrained(str(folder))
     return folder
 
 
@@ -164,25 +255,59 @@ def save_zoedepth(folder: Path, full: bool = False, seed: int = 0) -> Path:
 
     torch.manual_seed(seed)
     bins = 64 if full else 8
-    nk = [{"name": "nyu", "n_bins": bins, "min_depth": 1e-3, "max_depth": 10.0},
-          {"name": "kitti", "n_bins": bins, "min_depth": 1e-3, "max_depth": 80.0}]
-    if full:   # BEiT-L/16 at 384, features from layers 6, 12, 18, 24
-        backbone = BeitConfig(image_size=384, patch_size=16, hidden_size=1024, num_hidden_layers=24,
-                              num_attention_heads=16, intermediate_size=4096, out_indices=[6, 12, 18, 24],
-                              use_relative_position_bias=True, reshape_hidden_states=False, add_fpn=False)
-        cfg = ZoeDepthConfig(backbone_config=backbone, bin_configurations=nk, num_patch_transformer_layers=4,
-                             patch_transformer_hidden_size=128, patch_transformer_intermediate_size=1024,
-                             patch_transformer_num_attention_heads=4)
+    nk = [
+        {"name": "nyu", "n_bins": bins, "min_depth": 1e-3, "max_depth": 10.0},
+        {"name": "kitti", "n_bins": bins, "min_depth": 1e-3, "max_depth": 80.0},
+    ]
+    if full:  # BEiT-L/16 at 384, features from layers 6, 12, 18, 24
+        backbone = BeitConfig(
+            image_size=384,
+            patch_size=16,
+            hidden_size=1024,
+            num_hidden_layers=24,
+            num_attention_heads=16,
+            intermediate_size=4096,
+            out_indices=[6, 12, 18, 24],
+            use_relative_position_bias=True,
+            reshape_hidden_states=False,
+            add_fpn=False,
+        )
+        cfg = ZoeDepthConfig(
+            backbone_config=backbone,
+            bin_configurations=nk,
+            num_patch_transformer_layers=4,
+            patch_transformer_hidden_size=128,
+            patch_transformer_intermediate_size=1024,
+            patch_transformer_num_attention_heads=4,
+        )
         size = {"height": 384, "width": 512}
-    else:      # the NK domain classifier needs a 128-wide patch transformer whatever the rest
-        backbone = BeitConfig(image_size=64, patch_size=16, hidden_size=16, num_hidden_layers=4, num_attention_heads=2,
-                              intermediate_size=32, out_indices=[1, 2, 3, 4], use_relative_position_bias=True,
-                              reshape_hidden_states=False, add_fpn=False)
-        cfg = ZoeDepthConfig(backbone_config=backbone, neck_hidden_sizes=[8, 8, 16, 16], fusion_hidden_size=8,
-                             bottleneck_features=8, num_relative_features=4, bin_embedding_dim=8,
-                             num_attractors=[4, 2, 2, 1], num_patch_transformer_layers=4,
-                             patch_transformer_hidden_size=128, patch_transformer_intermediate_size=16,
-                             patch_transformer_num_attention_heads=2, bin_configurations=nk)
+    else:  # the NK domain classifier needs a 128-wide patch transformer whatever the rest
+        backbone = BeitConfig(
+            image_size=64,
+            patch_size=16,
+            hidden_size=16,
+            num_hidden_layers=4,
+            num_attention_heads=2,
+            intermediate_size=32,
+            out_indices=[1, 2, 3, 4],
+            use_relative_position_bias=True,
+            reshape_hidden_states=False,
+            add_fpn=False,
+        )
+        cfg = ZoeDepthConfig(
+            backbone_config=backbone,
+            neck_hidden_sizes=[8, 8, 16, 16],
+            fusion_hidden_size=8,
+            bottleneck_features=8,
+            num_relative_features=4,
+            bin_embedding_dim=8,
+            num_attractors=[4, 2, 2, 1],
+            num_patch_transformer_layers=4,
+            patch_transformer_hidden_size=128,
+            patch_transformer_intermediate_size=16,
+            patch_transformer_num_attention_heads=2,
+            bin_configurations=nk,
+        )
         size = {"height": 64, "width": 64}
     ZoeDepthForDepthEstimation(cfg).save_pretrained(str(folder))
     ZoeDepthImageProcessorPil(size=size, keep_aspect_ratio=True, ensure_multiple_of=32).save_pretrained(str(folder))

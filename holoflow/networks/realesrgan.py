@@ -7,6 +7,7 @@ their .safetensors conversions load with ``torch.load(weights_only=True)``. The 
 (scale, width, depth, growth) is read from the state dict: x2 models see a 2x2 pixel-unshuffled
 input (12 channels), x1 a 4x4 one (48), x4 the plain image (3).
 """
+
 from __future__ import annotations
 
 import functools
@@ -63,7 +64,7 @@ def rrdbnet_class():
             self.scale = scale
             unshuffle = {4: 1, 2: 2, 1: 4}[scale]
             self.unshuffle = unshuffle
-            self.conv_first = nn.Conv2d(num_in_ch * unshuffle ** 2, num_feat, 3, 1, 1)
+            self.conv_first = nn.Conv2d(num_in_ch * unshuffle**2, num_feat, 3, 1, 1)
             self.body = nn.Sequential(*[RRDB(num_feat, num_grow_ch) for _ in range(num_block)])
             self.conv_body = nn.Conv2d(num_feat, num_feat, 3, 1, 1)
             self.conv_up1 = nn.Conv2d(num_feat, num_feat, 3, 1, 1)
@@ -71,7 +72,7 @@ def rrdbnet_class():
             self.conv_hr = nn.Conv2d(num_feat, num_feat, 3, 1, 1)
             self.conv_last = nn.Conv2d(num_feat, num_out_ch, 3, 1, 1)
 
-        def forward(self, x):                                   # [B, 3, H, W], H and W % unshuffle == 0
+        def forward(self, x):  # [B, 3, H, W], H and W % unshuffle == 0
             if self.unshuffle > 1:
                 x = F.pixel_unshuffle(x, self.unshuffle)
             feat = self.conv_first(x)
@@ -93,9 +94,14 @@ def rrdbnet_from_state_dict(state: dict):
     unshuffle_sq = in_ch // state["conv_last.weight"].shape[0]
     scale = {1: 4, 4: 2, 16: 1}[unshuffle_sq]
     num_block = 1 + max(int(k.split(".")[1]) for k in state if k.startswith("body."))
-    net = rrdbnet_class()(num_in_ch=in_ch // unshuffle_sq, num_out_ch=state["conv_last.weight"].shape[0],
-                          scale=scale, num_feat=state["conv_first.weight"].shape[0], num_block=num_block,
-                          num_grow_ch=state["body.0.rdb1.conv1.weight"].shape[0])
+    net = rrdbnet_class()(
+        num_in_ch=in_ch // unshuffle_sq,
+        num_out_ch=state["conv_last.weight"].shape[0],
+        scale=scale,
+        num_feat=state["conv_first.weight"].shape[0],
+        num_block=num_block,
+        num_grow_ch=state["body.0.rdb1.conv1.weight"].shape[0],
+    )
     net.load_state_dict(state, strict=True)
     return net.eval()
 
@@ -115,12 +121,12 @@ def _tiled(net, x, tile: int, tile_pad: int):
             py0, px0 = max(y0 - tile_pad, 0), max(x0 - tile_pad, 0)
             py1, px1 = min(y1 + tile_pad, h), min(x1 + tile_pad, w)
             patch = x[:, :, py0:py1, px0:px1]
-            eh, ew = (-patch.shape[2]) % m, (-patch.shape[3]) % m        # pixel-unshuffle needs % m
+            eh, ew = (-patch.shape[2]) % m, (-patch.shape[3]) % m  # pixel-unshuffle needs % m
             if eh or ew:
                 patch = F.pad(patch, (0, ew, 0, eh), mode="replicate")
             res = net(patch)
             oy, ox = (y0 - py0) * s, (x0 - px0) * s
-            out[:, :, y0 * s:y1 * s, x0 * s:x1 * s] = res[:, :, oy:oy + (y1 - y0) * s, ox:ox + (x1 - x0) * s]
+            out[:, :, y0 * s : y1 * s, x0 * s : x1 * s] = res[:, :, oy : oy + (y1 - y0) * s, ox : ox + (x1 - x0) * s]
     return out
 
 
@@ -135,17 +141,24 @@ def upscale_srgb(net, img, tile: int = 256, tile_pad: int = 32, wrap_pad: int = 
 
     h, w = img.shape[-2:]
     p = min(wrap_pad, w)
-    x = torch.cat([img[..., w - p:], img, img[..., :p]], dim=-1)          # [1, 3, H, W + 2p]
+    x = torch.cat([img[..., w - p :], img, img[..., :p]], dim=-1)  # [1, 3, H, W + 2p]
     py = min(wrap_pad, h - 1)
     if py > 0:
         x = F.pad(x, (0, 0, py, py), mode="replicate")
     y = _tiled(net, x, tile, tile_pad)
     s = net.scale
-    return y[..., py * s:(py + h) * s, p * s:(p + w) * s].clamp(0, 1)
+    return y[..., py * s : (py + h) * s, p * s : (p + w) * s].clamp(0, 1)
 
 
-def upscale(pano: np.ndarray, width: int, height: int, model: str = "", tile: int = 256,
-            device: str = "cpu", progress: Progress = None) -> np.ndarray:
+def upscale(
+    pano: np.ndarray,
+    width: int,
+    height: int,
+    model: str = "",
+    tile: int = 256,
+    device: str = "cpu",
+    progress: Progress = None,
+) -> np.ndarray:
     """Real-ESRGAN to exactly ``width x height``: network passes until the image is at least that
     wide (x4plus: one pass from 1536 to 6144; x2plus: two), then a wrap-aware Lanczos resize.
 
@@ -157,7 +170,7 @@ def upscale(pano: np.ndarray, width: int, height: int, model: str = "", tile: in
     dev = torch_device(device)
     dtype = half_on_cuda(dev)
     net = rrdbnet_from_state_dict(load_state_dict(file)).to(dev, dtype)
-    img = to_chw(linear_to_srgb(pano, clip=True), dev, dtype)                         # [1, 3, H, W]
+    img = to_chw(linear_to_srgb(pano, clip=True), dev, dtype)  # [1, 3, H, W]
     passes = 0
     if net.scale > 1 and img.shape[-1] < width:
         passes = math.ceil(math.log(width / img.shape[-1], net.scale) - 1e-9)
@@ -172,5 +185,6 @@ def upscale(pano: np.ndarray, width: int, height: int, model: str = "", tile: in
 
 def upscale_engine(pano: np.ndarray, prompt: str, cfg, seed: int, device: str, progress: Progress):
     """upscale's ``realesrgan`` engine (holoflow.imageops.config.UpscaleParams): (pano, meta)."""
-    return upscale(pano, cfg.width, cfg.height, cfg.model, cfg.tile, device, progress), \
-        {"model": cfg.model or "default"}
+    return upscale(pano, cfg.width, cfg.height, cfg.model, cfg.tile, device, progress), {
+        "model": cfg.model or "default"
+    }

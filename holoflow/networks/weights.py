@@ -11,6 +11,7 @@ Nothing here downloads (``holoflow models pull`` does: holoflow.networks.manifes
 When the weights are not there, :class:`MissingWeights` carries ONE line saying what to download
 and where to put it; stages print it and exit non-zero (docs/stage-protocol.md).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -25,7 +26,7 @@ DEFAULTS: dict[str, str] = {
     "tile_base": "archerfmy0831/sd-t2i-360panoimage/sr-base",
     "controlnet_tile": "archerfmy0831/sd-t2i-360panoimage/sr-control",
     "realesrgan": "archerfmy0831/sd-t2i-360panoimage/RealESRGAN_x2plus.pth",
-    "depth_anything": "depth-anything/Depth-Anything-V2-Small-hf",   # the CPU default; larger ones by name
+    "depth_anything": "depth-anything/Depth-Anything-V2-Small-hf",  # the CPU default; larger ones by name
     "zoedepth": "Intel/zoedepth-nyu-kitti",
     "lama": "",  # no official HF repo: a local file converted from big-lama (docs/engines.md)
 }
@@ -47,7 +48,7 @@ def describe(model: str) -> str:
     """'NAME, N parameters, licence L' for a KNOWN model id (the repo part of ``model``, or a snapshot
     folder of the HF cache: ``.../models--ORG--NAME/snapshots/REV``), else ''."""
     cached = [part for part in Path(model).parts if part.startswith("models--")]
-    repo = cached[-1][len("models--"):].replace("--", "/", 1) if cached else "/".join(model.split("/")[:2])
+    repo = cached[-1][len("models--") :].replace("--", "/", 1) if cached else "/".join(model.split("/")[:2])
     known = KNOWN.get(repo)
     if not known:
         return ""
@@ -81,22 +82,26 @@ def resolve(model: str, role: str, param: str) -> Path:
     model = (model or DEFAULTS.get(role, "")).strip()
     if not model:
         raise MissingWeights(
-            f"{role}: no model given and no default; set {param}=/path/to/weights (see docs/engines.md)")
+            f"{role}: no model given and no default; set {param}=/path/to/weights (see docs/engines.md)"
+        )
     local = Path(model).expanduser()
     if local.exists():
         return local.resolve()
     if _is_pathlike(model) or model.count("/") < 1:
         raise MissingWeights(
             f"{role}: weights not found at '{model}'; put them there or set {param}=/path/to/weights "
-            f"(see docs/engines.md)")
+            f"(see docs/engines.md)"
+        )
     parts = model.split("/")
     repo, sub = "/".join(parts[:2]), "/".join(parts[2:])
     from huggingface_hub import snapshot_download
     from huggingface_hub.errors import LocalEntryNotFoundError
 
-    hint = (f"{role}: '{model}' is not in the local Hugging Face cache ({_cache_dir()}); download it with "
-            f"`holoflow models pull {model}` or `hf download {repo}` (or save it to a folder and set "
-            f"{param}=/that/folder)")
+    hint = (
+        f"{role}: '{model}' is not in the local Hugging Face cache ({_cache_dir()}); download it with "
+        f"`holoflow models pull {model}` or `hf download {repo}` (or save it to a folder and set "
+        f"{param}=/that/folder)"
+    )
     try:
         root = Path(snapshot_download(repo, local_files_only=True))
     except (LocalEntryNotFoundError, OSError, ValueError):
@@ -139,7 +144,8 @@ def load_state_dict(file: Path) -> dict:
     except Exception as err:  # pickles with arbitrary objects are refused by design
         raise MissingWeights(
             f"cannot load '{file}' as a plain state dict ({type(err).__name__}); convert it to "
-            f".safetensors as described in docs/engines.md") from None
+            f".safetensors as described in docs/engines.md"
+        ) from None
     if not isinstance(state, dict):
         raise MissingWeights(f"'{file}' holds a {type(state).__name__}, not a state dict; see docs/engines.md")
     return state

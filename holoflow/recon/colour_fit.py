@@ -24,6 +24,7 @@ pixels) keep their colour. Targets are sRGB in [0, 1], the training convention; 
 c_max above 1, so that a Gaussian makes up for coverage below 1 next to a white highlight (the
 renderer clamps at 0 only, as 3DGS).
 """
+
 from __future__ import annotations
 
 import math
@@ -44,16 +45,23 @@ def viewing_views(pano: torch.Tensor, cams: dict, size: int) -> list[dict]:
 
     K = intrinsics(cams)
     scale = torch.tensor([size / cams["width"], size / cams["height"], 1.0], dtype=K.dtype)
-    K = K * scale[:, None]                                                  # same field of view
+    K = K * scale[:, None]  # same field of view
     out = []
     chunk = 8
     vms = torch.stack([torch.tensor(v["viewmat"], dtype=torch.float32).reshape(4, 4) for v in cams["views"]])
     for s in range(0, len(vms), chunk):
-        vm = vms[s:s + chunk]
+        vm = vms[s : s + chunk]
         imgs = equirect_to_pinhole(pano.float(), K.expand(len(vm), 3, 3), vm, size, size, mode="antialias")
         for j in range(len(vm)):
-            out.append(dict(name=cams["views"][s + j]["name"], viewmat=vm[j].clone(), K=K.clone(), mask=None,
-                            image=linear_to_srgb_torch(imgs[j].permute(1, 2, 0)).contiguous()))
+            out.append(
+                dict(
+                    name=cams["views"][s + j]["name"],
+                    viewmat=vm[j].clone(),
+                    K=K.clone(),
+                    mask=None,
+                    image=linear_to_srgb_torch(imgs[j].permute(1, 2, 0)).contiguous(),
+                )
+            )
     return out
 
 
@@ -67,9 +75,18 @@ def polar_weights(views: list[dict], weight: float, pole_deg: float = 25.0) -> l
     return [float(weight) if bool(p) else 1.0 for p in polar]
 
 
-def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu", relax: float = 1.0,
-                min_weight: float = 0.05, chunk: int = 8, progress: Progress = None,
-                weights: list[float] | None = None, max_colour: float = 1.0) -> dict:
+def fit_colours(
+    model,
+    views: list[dict],
+    iterations: int,
+    backend: str = "cpu",
+    relax: float = 1.0,
+    min_weight: float = 0.05,
+    chunk: int = 8,
+    progress: Progress = None,
+    weights: list[float] | None = None,
+    max_colour: float = 1.0,
+) -> dict:
     """Projected SART on ``model``'s DC colours (module docstring), in place: ``iterations`` passes
     over ``views`` (one image size; image sRGB [H, W, 3], viewmat [4, 4], K [3, 3]), each view's
     pixels weighted by ``weights`` (None: all 1), colours kept in [0, ``max_colour``]. Returns the log:
@@ -95,19 +112,19 @@ def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu",
         num = torch.zeros(len(means), 3, device=dev, dtype=torch.float64)
         den = torch.zeros(len(means), device=dev, dtype=torch.float64)
         sq, count = 0.0, 0
-        step = 1 if view_dependent else chunk                     # SH > 0: colours differ per camera
+        step = 1 if view_dependent else chunk  # SH > 0: colours differ per camera
         for s in range(0, len(views), step):
-            part = views[s:s + step]
+            part = views[s : s + step]
             vm = torch.stack([v["viewmat"] for v in part]).to(dev)
             K = torch.stack([v["K"] for v in part]).to(dev)
-            rgb = camera_colors(means, model.sh.detach(), vm[:1], model.sh_degree)[0]          # [N, 3]
+            rgb = camera_colors(means, model.sh.detach(), vm[:1], model.sh_degree)[0]  # [N, 3]
             feats = torch.cat([rgb, torch.ones(len(means), 1, device=dev)], 1).requires_grad_(True)
             out = rasterize(means, quats, scales, opac, feats, vm, K, w, h, backend=backend, depth=False)
             target = torch.stack([v["image"] for v in part]).to(dev)
-            resid = (out["rgb"][..., :3] - target).detach()                 # [c, H, W, 3]
-            u = torch.tensor(weights[s:s + step], device=dev, dtype=resid.dtype)[:, None, None]   # [c, 1, 1]
+            resid = (out["rgb"][..., :3] - target).detach()  # [c, H, W, 3]
+            u = torch.tensor(weights[s : s + step], device=dev, dtype=resid.dtype)[:, None, None]  # [c, 1, 1]
             loss = (out["rgb"][..., :3] * (resid * u[..., None])).sum() + (out["rgb"][..., 3] * u).sum()
-            g, = torch.autograd.grad(loss, feats)                            # [N, 4]
+            (g,) = torch.autograd.grad(loss, feats)  # [N, 4]
             num += g[:, :3].double()
             den += g[:, 3].double()
             sq += float((resid.double() ** 2).sum())
@@ -121,11 +138,18 @@ def fit_colours(model, views: list[dict], iterations: int, backend: str = "cpu",
             ok = den > min_weight
             seen = int(ok.sum())
             step = torch.where(ok[:, None], num / den.clamp_min(min_weight)[:, None], torch.zeros_like(num))
-            base = SH_C0 * model.sh_dc[:, 0, :].double() + 0.5                  # the DC colour, sRGB
+            base = SH_C0 * model.sh_dc[:, 0, :].double() + 0.5  # the DC colour, sRGB
             new = torch.where(ok[:, None], (base - relax * step).clamp(0.0, max_colour), base)
             model.sh_dc[:, 0, :] = ((new - 0.5) / SH_C0).to(model.sh_dc.dtype)
         if progress is not None:
             progress(it + 1, iterations, "colour fit")
-    return {"iterations": iterations, "size": [w, h], "views": len(views), "relax": relax,
-            "weights": sorted(set(weights)), "max_colour": max_colour,
-            "psnr_before_pass": [round(p, 4) for p in psnr], "seen_gaussians": seen}
+    return {
+        "iterations": iterations,
+        "size": [w, h],
+        "views": len(views),
+        "relax": relax,
+        "weights": sorted(set(weights)),
+        "max_colour": max_colour,
+        "psnr_before_pass": [round(p, 4) for p in psnr],
+        "seen_gaussians": seen,
+    }

@@ -20,6 +20,7 @@ for what it cannot reach, telea | ns via ``cv2.inpaint``, fsr_fast | fsr_best vi
 display-referred sRGB [N, H, W, 3] in [0, 1]: the inpainters are built for display images. Observed
 pixels are returned bit-exact; only missing pixels change.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -27,7 +28,7 @@ from numba import njit
 
 from holoflow.recon.config import InpSetParams
 
-OPENCV_METHODS = ("telea", "ns", "fsr_fast", "fsr_best")     # cv2 methods; ``background``: see inpaint_views
+OPENCV_METHODS = ("telea", "ns", "fsr_fast", "fsr_best")  # cv2 methods; ``background``: see inpaint_views
 
 
 def missing_mask(alpha: np.ndarray, pcd_valid: np.ndarray | None, alpha_threshold: float = 0.5) -> np.ndarray:
@@ -67,12 +68,12 @@ def inpaint_opencv(images: np.ndarray, masks: np.ndarray, method: str = "telea",
         else:
             filled = np.zeros_like(u8)
             flag = cv2.xphoto.INPAINT_FSR_FAST if method == "fsr_fast" else cv2.xphoto.INPAINT_FSR_BEST
-            cv2.xphoto.inpaint(u8, (1 - m8) * 255, filled, flag)      # xphoto: non-zero = valid
+            cv2.xphoto.inpaint(u8, (1 - m8) * 255, filled, flag)  # xphoto: non-zero = valid
         out[i][m] = filled[m].astype(np.float32) / 255.0
     return out
 
 
-DIRECTIONS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))   # (dy, dx)
+DIRECTIONS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))  # (dy, dx)
 
 
 def first_observed(valid: np.ndarray, step: tuple[int, int], max_dist: int) -> tuple[np.ndarray, np.ndarray]:
@@ -108,8 +109,9 @@ def _walk(valid, dy, dx, max_dist, rows, cols, dist):
             rows[y, x], cols[y, x] = y + k * dy, x + k * dx
 
 
-def background_fill(image: np.ndarray, missing: np.ndarray, depth: np.ndarray, max_dist: int = 32,
-                    tol: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+def background_fill(
+    image: np.ndarray, missing: np.ndarray, depth: np.ndarray, max_dist: int = 32, tol: float = 0.1
+) -> tuple[np.ndarray, np.ndarray]:
     """Fill disocclusion holes from their far (background) side.
 
     A hole that opens when the camera moves is surface hidden behind a nearer object, so its content
@@ -123,12 +125,12 @@ def background_fill(image: np.ndarray, missing: np.ndarray, depth: np.ndarray, m
     image = np.asarray(image, np.float32)
     valid = ~np.asarray(missing, bool)
     hits = [first_observed(valid, d, max_dist) for d in DIRECTIONS]
-    z = np.stack([np.where(dist > 0, depth[idx], -np.inf) for idx, dist in hits])      # [8, H, W]
-    far = z.max(0)                                                                     # [H, W]
-    use = np.isfinite(z) & (z >= far * (1.0 - tol))                                     # [8, H, W]
+    z = np.stack([np.where(dist > 0, depth[idx], -np.inf) for idx, dist in hits])  # [8, H, W]
+    far = z.max(0)  # [H, W]
+    use = np.isfinite(z) & (z >= far * (1.0 - tol))  # [8, H, W]
     wts = np.stack([np.where(u, 1.0 / np.maximum(dist, 1), 0.0) for u, (_, dist) in zip(use, hits)])
-    col = np.stack([image[idx] for idx, _ in hits])                                    # [8, H, W, 3]
-    total = wts.sum(0)                                                                 # [H, W]
+    col = np.stack([image[idx] for idx, _ in hits])  # [8, H, W, 3]
+    total = wts.sum(0)  # [H, W]
     fill = (wts[..., None] * col).sum(0) / np.maximum(total, 1e-12)[..., None]
     out = image.copy()
     done = ~valid & (total > 0)
@@ -136,8 +138,15 @@ def background_fill(image: np.ndarray, missing: np.ndarray, depth: np.ndarray, m
     return out, ~valid & ~done
 
 
-def inpaint_views(images: np.ndarray, masks: np.ndarray, engine: str, cfg: InpSetParams, device: str = "cpu",
-                  progress=None, depths: np.ndarray | None = None) -> np.ndarray:
+def inpaint_views(
+    images: np.ndarray,
+    masks: np.ndarray,
+    engine: str,
+    cfg: InpSetParams,
+    device: str = "cpu",
+    progress=None,
+    depths: np.ndarray | None = None,
+) -> np.ndarray:
     """Inpaint only the views that have missing pixels, with ``engine`` (a name in
     ``InpSetParams.ENGINES``: opencv, lama) and inp_set's ``cfg``.
     images [N, H, W, 3] sRGB [0, 1]; masks [N, H, W] bool; depths [N, H, W] metres (the render's
@@ -149,28 +158,43 @@ def inpaint_views(images: np.ndarray, masks: np.ndarray, engine: str, cfg: InpSe
     out = images.copy()
     if len(todo) == 0:
         return out
-    filled = InpSetParams.ENGINES.get(engine)(images[todo], masks[todo], None if depths is None else
-                                              np.asarray(depths)[todo], cfg, device, progress)
+    filled = InpSetParams.ENGINES.get(engine)(
+        images[todo], masks[todo], None if depths is None else np.asarray(depths)[todo], cfg, device, progress
+    )
     m = masks[todo][..., None]
     out[todo] = np.where(m, filled, images[todo])
     return out
 
 
-def opencv_engine(images: np.ndarray, masks: np.ndarray, depths: np.ndarray | None, cfg: InpSetParams,
-                  device: str = "cpu", progress=None) -> np.ndarray:
+def opencv_engine(
+    images: np.ndarray,
+    masks: np.ndarray,
+    depths: np.ndarray | None,
+    cfg: InpSetParams,
+    device: str = "cpu",
+    progress=None,
+) -> np.ndarray:
     """inp_set's ``opencv`` engine: cfg.method ``background`` (``background_fill`` within cfg.max_dist px,
     then telea for what it cannot reach; needs ``depths``) or a cv2 method (cfg.radius px)."""
     if cfg.method != "background":
         return inpaint_opencv(images, masks, cfg.method, cfg.radius)
     if depths is None:
         raise ValueError("inpaint: method 'background' needs the rendered depth")
-    pre = [background_fill(images[i], masks[i], np.asarray(depths[i], np.float32), cfg.max_dist)
-           for i in range(len(images))]
+    pre = [
+        background_fill(images[i], masks[i], np.asarray(depths[i], np.float32), cfg.max_dist)
+        for i in range(len(images))
+    ]
     return inpaint_opencv(np.stack([f for f, _ in pre]), np.stack([r for _, r in pre]), "telea", cfg.radius)
 
 
-def lama_engine(images: np.ndarray, masks: np.ndarray, depths: np.ndarray | None, cfg: InpSetParams,
-                device: str = "cpu", progress=None) -> np.ndarray:
+def lama_engine(
+    images: np.ndarray,
+    masks: np.ndarray,
+    depths: np.ndarray | None,
+    cfg: InpSetParams,
+    device: str = "cpu",
+    progress=None,
+) -> np.ndarray:
     """inp_set's ``lama`` engine (holoflow.networks.lama, weights: cfg.model); LaMa takes linear RGB."""
     import torch
 

@@ -11,6 +11,7 @@ it was measured), or run once over all of a model's phases with ``lr_decay: mode
 schedule; the paper profile: the paper gives iteration counts per phase, nothing more). Opacity reset is off
 by default (``opacity_reset_every: 0``), as in the paper: it would wipe the point cloud's placement.
 """
+
 from __future__ import annotations
 
 import math
@@ -23,11 +24,17 @@ from holoflow.quality import metrics
 from holoflow.recon.config import OptimParams, PreOptParams, TransferOptParams
 from holoflow.stage import Progress
 
-TRAIN_SEED_STRIDE = 1_000_003   # train_seed k moves every phase's seed by k x this (a prime, far from 1000 i)
+TRAIN_SEED_STRIDE = 1_000_003  # train_seed k moves every phase's seed by k x this (a prime, far from 1000 i)
 
 
-def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str = "cpu",
-               sh_degree: int = 0, footprint: tuple | None = None):
+def init_model(
+    xyz: np.ndarray,
+    rgb_u8: np.ndarray,
+    opacity: float,
+    device: str = "cpu",
+    sh_degree: int = 0,
+    footprint: tuple | None = None,
+):
     """Gaussians (SH degree ``sh_degree``, higher bands 0) at the points xyz [N, 3] metres, coloured
     rgb [N, 3] uint8 (sRGB), with
     initial ``opacity`` (a stage's ``init_opacity``; 3DGS: 0.1; a surface point cloud tolerates more,
@@ -47,8 +54,13 @@ def init_model(xyz: np.ndarray, rgb_u8: np.ndarray, opacity: float, device: str 
 
         scales, quats = footprint_gaussians(torch.from_numpy(np.asarray(xyz, np.float64)), *footprint)
         shape = dict(scales=scales, quats=quats)
-    return GaussianModel.from_points(np.asarray(xyz, np.float32), np.asarray(rgb_u8, np.float32) / 255.0,
-                                     sh_degree=sh_degree, opacity=opacity, **shape).to(device)
+    return GaussianModel.from_points(
+        np.asarray(xyz, np.float32),
+        np.asarray(rgb_u8, np.float32) / 255.0,
+        sh_degree=sh_degree,
+        opacity=opacity,
+        **shape,
+    ).to(device)
 
 
 def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
@@ -68,19 +80,31 @@ def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
         return None
     pf = json.loads(path.read_text())
     caps = PolarCaps(**pf["polar_caps"]) if "polar_caps" in pf else None
-    tails = [pf[k] for k in ("layer", "dome") if k in pf]      # sparser grids after P_f's own points, in order
+    tails = [pf[k] for k in ("layer", "dome") if k in pf]  # sparser grids after P_f's own points, in order
     tail_points = sum(int(t["points"]) for t in tails)
-    tail_spacing = torch.cat([torch.full((int(t["points"]),), float(t["spacing_rad"]), dtype=torch.float64)
-                              for t in tails]) if tails else 0.0
-    low_pass = EPS2D * float(pf.get("view_pixel_rad", 0.0)) ** 2       # 0.3 px^2 at the view size
+    tail_spacing = (
+        torch.cat([torch.full((int(t["points"]),), float(t["spacing_rad"]), dtype=torch.float64) for t in tails])
+        if tails
+        else 0.0
+    )
+    low_pass = EPS2D * float(pf.get("view_pixel_rad", 0.0)) ** 2  # 0.3 px^2 at the view size
     normals = None
     if cfg.footprint_orient == "surface":
         from holoflow.io.ply import read_point_normals
 
         found = read_point_normals(Path(cloud_dir) / "pf.ply")
         normals = None if found is None else torch.from_numpy(found).double()
-    return (float(pf["spacing_rad"]), cfg.footprint_width, cfg.footprint_thickness, caps, tail_points,
-            tail_spacing, low_pass, normals, cfg.footprint_max_stretch)
+    return (
+        float(pf["spacing_rad"]),
+        cfg.footprint_width,
+        cfg.footprint_thickness,
+        caps,
+        tail_points,
+        tail_spacing,
+        low_pass,
+        normals,
+        cfg.footprint_max_stretch,
+    )
 
 
 def panorama_extent(xyz: np.ndarray) -> float:
@@ -98,8 +122,9 @@ def panorama_extent(xyz: np.ndarray) -> float:
     return max(float(r.median()), 1e-6)
 
 
-def train_config(iterations: int, cfg: OptimParams, backend: str, extent: float | None = None,
-                 lr_span: tuple[int, int] | None = None):
+def train_config(
+    iterations: int, cfg: OptimParams, backend: str, extent: float | None = None, lr_span: tuple[int, int] | None = None
+):
     """A ``holoflow.splat.TrainConfig`` for one phase from a stage's params (``cfg``): ``densify_every``,
     ``densify_from`` and ``densify_stop`` (densification runs at steps densify_from < it <=
     min(densify_stop x iterations, iterations - densify_every)),
@@ -113,15 +138,28 @@ def train_config(iterations: int, cfg: OptimParams, backend: str, extent: float 
     every, iters = cfg.densify_every, int(iterations)
     # densification ends at densify_stop x iterations (3DGS: 15k of 30k) and leaves at least
     # ``every`` steps to train what it added last
-    return TrainConfig(iterations=iters, densify_every=every, densify_from=cfg.densify_from,
-                       densify_until=max(1, min(int(cfg.densify_stop * iters), iters - every) + 1),
-                       opacity_reset_every=cfg.opacity_reset_every, max_gaussians=cfg.max_gaussians,
-                       backend=backend, scene_extent=extent,
-                       **({} if lr_span is None else dict(step_offset=lr_span[0], lr_means_steps=lr_span[1])))
+    return TrainConfig(
+        iterations=iters,
+        densify_every=every,
+        densify_from=cfg.densify_from,
+        densify_until=max(1, min(int(cfg.densify_stop * iters), iters - every) + 1),
+        opacity_reset_every=cfg.opacity_reset_every,
+        max_gaussians=cfg.max_gaussians,
+        backend=backend,
+        scene_extent=extent,
+        **({} if lr_span is None else dict(step_offset=lr_span[0], lr_means_steps=lr_span[1])),
+    )
 
 
-def run_phases(model, phases: list[tuple[str, list[dict], int]], cfg: OptimParams, backend: str, seed: int,
-               progress: Progress = None, extent: float | None = None) -> dict:
+def run_phases(
+    model,
+    phases: list[tuple[str, list[dict], int]],
+    cfg: OptimParams,
+    backend: str,
+    seed: int,
+    progress: Progress = None,
+    extent: float | None = None,
+) -> dict:
     """Train ``model`` in place through ``phases`` = [(name, views, iterations)], in order; phases with
     0 iterations are skipped. ``progress(done, total, "iters")`` counts iterations over all phases.
     Phase i draws its views from seed + 1000 i + TRAIN_SEED_STRIDE x ``cfg.train_seed``:
@@ -149,37 +187,71 @@ def run_phases(model, phases: list[tuple[str, list[dict], int]], cfg: OptimParam
         t0 = time.perf_counter()
         phase_seed = seed + 1000 * i + TRAIN_SEED_STRIDE * cfg.train_seed
         span = (start, total) if cfg.lr_decay == "model" else None
-        tlog = train(model, views, train_config(iters, cfg, backend, extent, span), progress=phase_progress,
-                     seed=phase_seed)
+        tlog = train(
+            model, views, train_config(iters, cfg, backend, extent, span), progress=phase_progress, seed=phase_seed
+        )
         done += iters
         tlog.pop("time_s", None)
         log["seconds"][name] = round(time.perf_counter() - t0, 3)
-        log["phases"].append(dict(name=name, iterations=iters, views=len(views),
-                                  gaussians=int(model.means.shape[0]), train=tlog))
+        log["phases"].append(
+            dict(name=name, iterations=iters, views=len(views), gaussians=int(model.means.shape[0]), train=tlog)
+        )
     return log
 
 
-def pre_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pcd_views: list[dict], pano_views: list[dict],
-                 cfg: PreOptParams, backend: str, seed: int,
-                 progress: Progress = None, device: str = "cpu", footprint=None):
+def pre_optimize(
+    xyz: np.ndarray,
+    rgb_u8: np.ndarray,
+    pcd_views: list[dict],
+    pano_views: list[dict],
+    cfg: PreOptParams,
+    backend: str,
+    seed: int,
+    progress: Progress = None,
+    device: str = "cpu",
+    footprint=None,
+):
     """G0: init from P_f (``footprint``: ``init_model``'s), ``cfg.pcd_iters`` on the PCD set (masked),
     then ``cfg.pano_iters`` on the PANO set, trained on ``device``. Returns (model, log)."""
     model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree, footprint)
-    log = run_phases(model, [("pcd", pcd_views, cfg.pcd_iters), ("pano", pano_views, cfg.pano_iters)], cfg,
-                     backend, seed, progress, panorama_extent(xyz))
+    log = run_phases(
+        model,
+        [("pcd", pcd_views, cfg.pcd_iters), ("pano", pano_views, cfg.pano_iters)],
+        cfg,
+        backend,
+        seed,
+        progress,
+        panorama_extent(xyz),
+    )
     return model, log
 
 
-def transfer_optimize(xyz: np.ndarray, rgb_u8: np.ndarray, pano_views: list[dict], inp_views: list[dict],
-                      cfg: TransferOptParams, backend: str, seed: int,
-                      progress: Progress = None, device: str = "cpu", footprint=None):
+def transfer_optimize(
+    xyz: np.ndarray,
+    rgb_u8: np.ndarray,
+    pano_views: list[dict],
+    inp_views: list[dict],
+    cfg: TransferOptParams,
+    backend: str,
+    seed: int,
+    progress: Progress = None,
+    device: str = "cpu",
+    footprint=None,
+):
     """G1: fresh init from P_f (``footprint``: ``init_model``'s), ``cfg.iters`` on PANO + INP sets
     together (INP left out when ``cfg.use_inp`` is false: the paper's ablation), trained on
     ``device``. Returns (model, log)."""
     model = init_model(xyz, rgb_u8, cfg.init_opacity, device, cfg.sh_degree, footprint)
     views = pano_views + (inp_views if cfg.use_inp else [])
-    log = run_phases(model, [("pano+inp" if cfg.use_inp else "pano", views, cfg.iters)], cfg, backend, seed,
-                     progress, panorama_extent(xyz))
+    log = run_phases(
+        model,
+        [("pano+inp" if cfg.use_inp else "pano", views, cfg.iters)],
+        cfg,
+        backend,
+        seed,
+        progress,
+        panorama_extent(xyz),
+    )
     return model, log
 
 
@@ -194,7 +266,7 @@ def render_views(model, views: list[dict], backend: str, chunk: int = 8, with_de
     dev = model.means.device
     rgbs, alphas, depths = [], [], []
     for s in range(0, len(views), chunk):
-        part = views[s:s + chunk]
+        part = views[s : s + chunk]
         vm = torch.stack([v["viewmat"] for v in part]).to(dev)
         K = torch.stack([v["K"] for v in part]).to(dev)
         out = render(model, vm, K, w, h, backend=backend, depth=with_depth)
@@ -215,9 +287,11 @@ def score_views(model, views: list[dict], backend: str) -> dict:
     masks = [v["mask"] for v in views]
     mask = torch.stack(masks) if all(m is not None for m in masks) else None
     p = metrics.psnr(rgb, target, mask)
-    return dict(psnr=None if math.isnan(p) else p,
-                ssim=metrics.ssim(rgb, target) if mask is None else None,    # SSIM windows ignore masks
-                empty_fraction=metrics.empty_fraction(alpha))
+    return dict(
+        psnr=None if math.isnan(p) else p,
+        ssim=metrics.ssim(rgb, target) if mask is None else None,  # SSIM windows ignore masks
+        empty_fraction=metrics.empty_fraction(alpha),
+    )
 
 
 def save_result(job, model, log: dict, pano_views: list[dict], ply_name: str) -> None:
@@ -231,6 +305,11 @@ def save_result(job, model, log: dict, pano_views: list[dict], ply_name: str) ->
     seconds = log.pop("seconds")
     job.output("train_log.json").write_text(dumps_log(log))
     last = log["phases"][-1]["train"] if log["phases"] else {}
-    job.meta(gaussians=len(model), final_loss=last["loss"][-1] if last.get("loss") else None,
-             psnr_pano=log["fit"]["pano"]["psnr"], ssim_pano=log["fit"]["pano"]["ssim"], backend=job.engine,
-             phase_seconds=seconds)
+    job.meta(
+        gaussians=len(model),
+        final_loss=last["loss"][-1] if last.get("loss") else None,
+        psnr_pano=log["fit"]["pano"]["psnr"],
+        ssim_pano=log["fit"]["pano"]["ssim"],
+        backend=job.engine,
+        phase_seconds=seconds,
+    )

@@ -4,6 +4,7 @@ Cameras sit at the panorama centre (the world origin) and turn about the vertica
 -y, docs/conventions.md), level with the horizon. Renders are sRGB (what the Gaussians hold) and
 written as 8-bit PNG / GIF with Pillow.
 """
+
 from __future__ import annotations
 
 import math
@@ -20,9 +21,9 @@ def yaw_cameras(n: int, pitch_deg: float = 0.0) -> torch.Tensor:
     +z, positive yaw turns towards +x), pitched up by ``pitch_deg``."""
     from holoflow.geometry.camera import look_at
 
-    yaw = torch.arange(n, dtype=torch.float64) * (2 * math.pi / n)               # [n]
+    yaw = torch.arange(n, dtype=torch.float64) * (2 * math.pi / n)  # [n]
     pitch = torch.full_like(yaw, math.radians(pitch_deg))
-    d = torch.stack([pitch.cos() * yaw.sin(), -pitch.sin(), pitch.cos() * yaw.cos()], -1)   # [n, 3]
+    d = torch.stack([pitch.cos() * yaw.sin(), -pitch.sin(), pitch.cos() * yaw.cos()], -1)  # [n, 3]
     return look_at(torch.zeros_like(d), d).float()
 
 
@@ -51,14 +52,18 @@ def render_at(model, viewmats: torch.Tensor, K: torch.Tensor, size: int, backend
     Ks[2, 2] = 1.0
     out = []
     for s in range(0, len(viewmats), 8):
-        vm = viewmats[s:s + 8].to(dev)
-        out.append(render(model, vm, Ks[None].expand(len(vm), 3, 3), size, size,
-                          backend=backend, depth=False)["rgb"].clamp(0, 1).cpu())
+        vm = viewmats[s : s + 8].to(dev)
+        out.append(
+            render(model, vm, Ks[None].expand(len(vm), 3, 3), size, size, backend=backend, depth=False)["rgb"]
+            .clamp(0, 1)
+            .cpu()
+        )
     return torch.cat(out)
 
 
-def write_previews(model, folder: str | Path, K: torch.Tensor, backend: str, size: int,
-                   strip_views: int = 8, gif_frames: int = 24) -> list[Path]:
+def write_previews(
+    model, folder: str | Path, K: torch.Tensor, backend: str, size: int, strip_views: int = 8, gif_frames: int = 24
+) -> list[Path]:
     """``size`` x ``size`` px renders (transfer_opt's ``preview_size``): previews/look_around.png (``strip_views`` level views side by side, then the same pitched
     +-45 deg in rows above / below) and previews/look_around.gif (``gif_frames`` level views).
     Returns the written paths."""

@@ -10,6 +10,7 @@ supervise) or None, "viewmat" [4, 4] world-to-camera, "K" [3, 3]}`` (the ``holof
 view contract, plus a name), and ``"seen"`` [H, W] float32 when the EXR has that channel (the PCD
 set: 1 where any point of P_s landed).
 """
+
 from __future__ import annotations
 
 import json
@@ -31,8 +32,9 @@ def read_cameras(folder: str | Path) -> dict:
 
 def intrinsics(cams: dict) -> torch.Tensor:
     """Pinhole K [3, 3] (pixels, centres at +0.5) of a cameras.json dict."""
-    return torch.tensor([[cams["fx"], 0.0, cams["cx"]], [0.0, cams["fy"], cams["cy"]], [0.0, 0.0, 1.0]],
-                        dtype=torch.float32)
+    return torch.tensor(
+        [[cams["fx"], 0.0, cams["cx"]], [0.0, cams["fy"], cams["cy"]], [0.0, 0.0, 1.0]], dtype=torch.float32
+    )
 
 
 def load_view_set(folder: str | Path, alpha_is_mask: bool) -> tuple[list[dict], dict]:
@@ -47,16 +49,23 @@ def load_view_set(folder: str | Path, alpha_is_mask: bool) -> tuple[list[dict], 
     views = []
     for v in cams["views"]:
         ch, _ = read_exr(folder / v["file"])
-        rgb = torch.from_numpy(np.stack([ch["R"], ch["G"], ch["B"]], -1))   # [H, W, 3] linear
+        rgb = torch.from_numpy(np.stack([ch["R"], ch["G"], ch["B"]], -1))  # [H, W, 3] linear
         mask = None
         if alpha_is_mask:
             if "A" not in ch:
                 raise ValueError(f"{folder / v['file']}: no A channel (the mask) in a masked view set")
-            mask = torch.from_numpy((ch["A"] >= 0.5).astype(np.float32))     # [H, W]
-        views.append(dict(name=v["name"], image=linear_to_srgb_torch(rgb).contiguous(), mask=mask,
-                          viewmat=torch.tensor(v["viewmat"], dtype=torch.float32).reshape(4, 4), K=K.clone()))
+            mask = torch.from_numpy((ch["A"] >= 0.5).astype(np.float32))  # [H, W]
+        views.append(
+            dict(
+                name=v["name"],
+                image=linear_to_srgb_torch(rgb).contiguous(),
+                mask=mask,
+                viewmat=torch.tensor(v["viewmat"], dtype=torch.float32).reshape(4, 4),
+                K=K.clone(),
+            )
+        )
         if "seen" in ch:
-            views[-1]["seen"] = torch.from_numpy((ch["seen"] >= 0.5).astype(np.float32))   # [H, W]
+            views[-1]["seen"] = torch.from_numpy((ch["seen"] >= 0.5).astype(np.float32))  # [H, W]
     return views, cams
 
 
@@ -65,8 +74,7 @@ def stack_cameras(views: list[dict]) -> tuple[torch.Tensor, torch.Tensor]:
     return torch.stack([v["viewmat"] for v in views]), torch.stack([v["K"] for v in views])
 
 
-def write_images(folder: str | Path, files: list[str], images_srgb: np.ndarray, alpha: np.ndarray,
-                 stage: str) -> None:
+def write_images(folder: str | Path, files: list[str], images_srgb: np.ndarray, alpha: np.ndarray, stage: str) -> None:
     """Write ``folder/files[i]`` as EXR: R, G, B linear (from sRGB images [N, H, W, 3]), A = alpha [N, H, W]."""
     folder = Path(folder)
     linear = srgb_to_linear_torch(torch.from_numpy(np.asarray(images_srgb, np.float32))).numpy()
@@ -76,8 +84,7 @@ def write_images(folder: str | Path, files: list[str], images_srgb: np.ndarray, 
         write_rgb(path, linear[i], {"holoflow.stage": stage}, A=np.asarray(alpha[i], np.float32))
 
 
-def write_view_set(folder: str | Path, cams: dict, images_srgb: np.ndarray, alpha: np.ndarray,
-                   stage: str) -> None:
+def write_view_set(folder: str | Path, cams: dict, images_srgb: np.ndarray, alpha: np.ndarray, stage: str) -> None:
     """Write a view set: one EXR per camera of ``cams`` (same order; see ``write_images``), plus
     cameras.json and a nerfstudio transforms.json."""
     from holoflow.geometry.camera_files import write_cameras, write_transforms

@@ -5,6 +5,7 @@ view sets as contact sheets with their masks, point clouds, training curves, fin
 state (ran / cached / cut off / used / not run), engine, params, wall time, CPU time, peak RSS and
 metrics. Images are embedded as data: URIs, so the one file can be mailed or archived.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -32,11 +33,20 @@ def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str
         if s.ran:
             figs, notes = fg.stage_figures(s.files, cloud_figs.get(s.name, {}))
             if s.missing:
-                notes.insert(0, f"{len(s.missing)} output(s) no longer in the store (removed by gc?): "
-                             + ", ".join(s.missing[:5]) + (" ..." if len(s.missing) > 5 else ""))
+                notes.insert(
+                    0,
+                    f"{len(s.missing)} output(s) no longer in the store (removed by gc?): "
+                    + ", ".join(s.missing[:5])
+                    + (" ..." if len(s.missing) > 5 else ""),
+                )
             metrics = fg.stage_metrics(s.record, s.files)
-            run_metrics.update({f"{s.name}: {k}": v for k, v in fg.scalars(s.record.get("meta", {})).items()
-                                if isinstance(v, (int, float)) and not isinstance(v, bool)})
+            run_metrics.update(
+                {
+                    f"{s.name}: {k}": v
+                    for k, v in fg.scalars(s.record.get("meta", {})).items()
+                    if isinstance(v, (int, float)) and not isinstance(v, bool)
+                }
+            )
         sections.append(page.stage_section(s, figs, notes, metrics))
     scene = run.run_dir / "transfer_opt" / "scene.ply"
     if view_size > 0 and scene.is_file():
@@ -50,8 +60,10 @@ def build(run: RunInfo, render_clouds: bool = True, view_size: int = 512) -> str
     from holoflow.report.truth_section import truth_sections
 
     sections[:0] = truth_sections(run.run_dir / "eval")
-    footer = (f"made by holoflow report at {time.strftime('%Y-%m-%d %H:%M:%S %Z')}; point clouds: {renderer}, "
-              f"cut away above the panorama centre, seen from above")
+    footer = (
+        f"made by holoflow report at {time.strftime('%Y-%m-%d %H:%M:%S %Z')}; point clouds: {renderer}, "
+        f"cut away above the panorama centre, seen from above"
+    )
     return page.document(run, sections, run_metrics, footer)
 
 
@@ -69,24 +81,33 @@ def _cloud_figures(run: RunInfo, cl) -> tuple[dict[str, dict[str, Any]], str]:
     out: dict[str, dict[str, Any]] = {}
     for (stage, rel, _), img in zip(plys, images):
         if img is not None:
-            out.setdefault(stage, {})[rel] = Figure(rel, pic.image_uri(img),
-                                                     f"{img.shape[1]} x {img.shape[0]}; rendered with {renderer}")
+            out.setdefault(stage, {})[rel] = Figure(
+                rel, pic.image_uri(img), f"{img.shape[1]} x {img.shape[0]}; rendered with {renderer}"
+            )
     return out, renderer
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="holoflow report", description=__doc__.split("\n\n")[0])
     p.add_argument("run", nargs="?", default="latest", help="run id (runs/<id>) or 'latest' (default)")
-    p.add_argument("--pipeline", default="pipeline.yaml", help="pipeline file (default ./pipeline.yaml): "
-                   "gives the stage order and lists stages the run did not include")
+    p.add_argument(
+        "--pipeline",
+        default="pipeline.yaml",
+        help="pipeline file (default ./pipeline.yaml): gives the stage order and lists stages the run did not include",
+    )
     p.add_argument("--store", help="store folder (default $HOLOFLOW_STORE, else artifacts/ beside the pipeline)")
     p.add_argument("-o", "--output", type=Path, help="HTML file to write (default ./report-<run id>.html)")
     p.add_argument("--no-clouds", action="store_true", help="skip the point-cloud pictures (faster)")
-    p.add_argument("--view-size", type=int, default=512,
-                   help="score the final scene at this viewing size, px (holoflow eval --run's table, source | "
-                        "render crops and novel views; 0 = skip)")
-    p.add_argument("--screenshot", type=Path, metavar="PNG",
-                   help="also screenshot the page with headless Chromium (1280 px wide)")
+    p.add_argument(
+        "--view-size",
+        type=int,
+        default=512,
+        help="score the final scene at this viewing size, px (holoflow eval --run's table, source | "
+        "render crops and novel views; 0 = skip)",
+    )
+    p.add_argument(
+        "--screenshot", type=Path, metavar="PNG", help="also screenshot the page with headless Chromium (1280 px wide)"
+    )
     p.add_argument("--screenshot-height", type=int, default=2400, help="screenshot height, CSS pixels")
     args = p.parse_args(argv)
 

@@ -11,6 +11,7 @@ View: points above the panorama centre (world y < 0; world up is -y, docs/conven
 so that an enclosed room shows its floor and walls; the camera looks at the origin from above and
 behind at ``EYE_DIR``, from ``EYE_DISTANCE`` times the 90th percentile of the kept points' radius.
 """
+
 from __future__ import annotations
 
 import json
@@ -21,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-SH_C0 = 0.28209479177387814          # degree-0 spherical harmonic; DC colour = 0.5 + SH_C0 * f_dc
-EYE_DIR = (0.45, -0.75, -0.5)        # world direction from the origin to the eye (up and behind)
+SH_C0 = 0.28209479177387814  # degree-0 spherical harmonic; DC colour = 0.5 + SH_C0 * f_dc
+EYE_DIR = (0.45, -0.75, -0.5)  # world direction from the origin to the eye (up and behind)
 EYE_DISTANCE = 2.2
-FOV_DEG = 40.0                       # vertical field of view
-MAX_POINTS = 300_000                 # a seeded random subset is drawn above this
-SIZE = (640, 400)                    # picture width, height in pixels
+FOV_DEG = 40.0  # vertical field of view
+MAX_POINTS = 300_000  # a seeded random subset is drawn above this
+SIZE = (640, 400)  # picture width, height in pixels
 BACKGROUND = (1.0, 1.0, 1.0)
 
 
@@ -77,11 +78,12 @@ def render_zbuffer(xyz: np.ndarray, rgb: np.ndarray, size: tuple[int, int] = SIZ
     xyz, rgb = cutaway(xyz, rgb)
     eye, target = camera(xyz)
     w, h = size
-    K = intrinsics_from_fov(FOV_DEG, h, h, dtype=torch.float64)    # square pixels, vertical FOV
+    K = intrinsics_from_fov(FOV_DEG, h, h, dtype=torch.float64)  # square pixels, vertical FOV
     K[0, 2] = w / 2
     vm = look_at(torch.tensor(eye), torch.tensor(target))
-    img, mask, _ = project_points_zbuffer(torch.from_numpy(xyz).double(), torch.from_numpy(rgb).double(),
-                                          K, vm, h, w, radius=2)
+    img, mask, _ = project_points_zbuffer(
+        torch.from_numpy(xyz).double(), torch.from_numpy(rgb).double(), K, vm, h, w, radius=2
+    )
     out = img.numpy()
     out[mask.numpy() == 0] = np.asarray(BACKGROUND) * 255.0
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
@@ -97,8 +99,13 @@ def render_pyvista(xyz: np.ndarray, rgb: np.ndarray, size: tuple[int, int] = SIZ
     try:
         plotter.set_background(BACKGROUND)
         if len(xyz):
-            plotter.add_points(pv.PolyData(xyz.astype(np.float32)), scalars=rgb, rgb=True, point_size=3.0,
-                               render_points_as_spheres=False)
+            plotter.add_points(
+                pv.PolyData(xyz.astype(np.float32)),
+                scalars=rgb,
+                rgb=True,
+                point_size=3.0,
+                render_points_as_spheres=False,
+            )
         plotter.camera_position = [tuple(eye), tuple(target), (0.0, -1.0, 0.0)]
         plotter.camera.view_angle = FOV_DEG
         return np.asarray(plotter.screenshot(return_img=True))[..., :3].copy()
@@ -113,11 +120,16 @@ def render_files(jobs: list[tuple[Path, Path]], timeout: float = 300.0) -> tuple
         return [], "none"
     env = dict(os.environ)
     if not env.get("DISPLAY"):
-        env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")   # no X: skip VTK's X attempt
+        env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")  # no X: skip VTK's X attempt
     spec = json.dumps([[str(a), str(b)] for a, b in jobs])
     try:
-        proc = subprocess.run([sys.executable, "-m", "holoflow.report.clouds", spec], env=env,
-                              capture_output=True, text=True, timeout=timeout)
+        proc = subprocess.run(
+            [sys.executable, "-m", "holoflow.report.clouds", spec],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+        )
         ok, why = proc.returncode == 0, _last_line(proc.stderr) or f"exit code {proc.returncode}"
     except subprocess.TimeoutExpired:
         ok, why = False, f"timed out after {timeout:g} s"

@@ -9,6 +9,7 @@ stage (including one added to pipeline.yaml later) gets pictures:
 - PLY files: pictures made by ``holoflow.report.clouds`` (passed in, rendered in one batch);
 - JSON files and the key record's meta: scalar numbers for the metrics table.
 """
+
 from __future__ import annotations
 
 import json
@@ -21,19 +22,19 @@ import numpy as np
 
 from holoflow.report import pictures as pic
 
-PANO_WIDTH = 1024        # panoramas and other top-level images are shown at most this wide, pixels
-SHEET_TILES = 64         # a contact sheet shows at most this many files (the first ones, sorted)
-SHEET_SIDE = 96          # contact sheet cell, pixels
+PANO_WIDTH = 1024  # panoramas and other top-level images are shown at most this wide, pixels
+SHEET_TILES = 64  # a contact sheet shows at most this many files (the first ones, sorted)
+SHEET_SIDE = 96  # contact sheet cell, pixels
 SHEET_COLS = 10
-SMOOTH = 10              # loss curves also show the mean of this many iterations
-MAX_KEYS = 16            # a JSON object with more keys than this (e.g. one entry per face) is left out
+SMOOTH = 10  # loss curves also show the mean of this many iterations
+MAX_KEYS = 16  # a JSON object with more keys than this (e.g. one entry per face) is left out
 MIME = {".png": "image/png", ".gif": "image/gif", ".jpg": "image/jpeg", ".jpeg": "image/jpeg"}
 
 
 @dataclass
 class Figure:
     title: str
-    uri: str                # data: URI
+    uri: str  # data: URI
     caption: str = ""
 
 
@@ -48,8 +49,7 @@ def exr_figures(path: Path, rel: str) -> list[Figure]:
     out = []
     for layer, img, caption in layers(ch, attrs):
         shown = pic.fit_width(img, PANO_WIDTH)
-        out.append(Figure(f"{rel} {layer}" if layer != "RGB" else rel, pic.image_uri(shown),
-                          f"{size}; {caption}"))
+        out.append(Figure(f"{rel} {layer}" if layer != "RGB" else rel, pic.image_uri(shown), f"{size}; {caption}"))
     return out
 
 
@@ -64,16 +64,19 @@ def layers(ch: dict[str, np.ndarray], attrs: dict[str, Any]) -> list[tuple[str, 
     return out
 
 
-def scalar_layer(name: str, values: np.ndarray, attrs: dict[str, Any],
-                 vrange: tuple[float, float] | None = None) -> tuple[np.ndarray, str]:
+def scalar_layer(
+    name: str, values: np.ndarray, attrs: dict[str, Any], vrange: tuple[float, float] | None = None
+) -> tuple[np.ndarray, str]:
     """One channel [H, W] -> (uint8 picture, caption), chosen by channel name and header."""
     kind = attrs.get("holoflow.depth_kind")
     if name == "A":
         return pic.grey(values), "mask: white = 1 (observed / hit), black = 0 (missing)"
     if name == "Z" or (kind in ("radial", "z") and name.endswith("Z")):
         lo, hi = pic.robust_range(values)
-        return pic.depth_map(values), (f"{kind or 'radial'} depth, inverse-depth colours (red near, blue far; "
-                                       f"{lo:.2f}-{hi:.2f} m), grey = no value / sky")
+        return pic.depth_map(values), (
+            f"{kind or 'radial'} depth, inverse-depth colours (red near, blue far; "
+            f"{lo:.2f}-{hi:.2f} m), grey = no value / sky"
+        )
     if "line" in str(attrs.get("holoflow.meaning", "")):
         return pic.grey(1.0 - values), "line art, shown dark on white"
     lo, hi = vrange or pic.robust_range(values)
@@ -95,12 +98,17 @@ def sheet_figures(folder: str, paths: list[Path]) -> list[Figure]:
     captions: dict[str, str] = {}
     scalars = sorted({c for ch, _ in files for c in ch if not _is_rgb(c, ch)})
     if any(all(c in ch for c in "RGB") for ch, _ in files):
-        groups["RGB"] = [pic.colour(np.stack([ch[c] for c in "RGB"], -1)) if all(c in ch for c in "RGB")
-                         else _blank(ch) for ch, _ in files]
+        groups["RGB"] = [
+            pic.colour(np.stack([ch[c] for c in "RGB"], -1)) if all(c in ch for c in "RGB") else _blank(ch)
+            for ch, _ in files
+        ]
         captions["RGB"] = "linear RGB shown in sRGB"
     for name in scalars:
-        common = None if name.startswith("raw") else pic.robust_range(
-            np.concatenate([ch[name].ravel() for ch, _ in files if name in ch]))
+        common = (
+            None
+            if name.startswith("raw")
+            else pic.robust_range(np.concatenate([ch[name].ravel() for ch, _ in files if name in ch]))
+        )
         tiles = []
         for ch, attrs in files:
             if name in ch:
@@ -116,9 +124,13 @@ def sheet_figures(folder: str, paths: list[Path]) -> list[Figure]:
     out = []
     for layer, tiles in groups.items():
         sheet = pic.mosaic(tiles, SHEET_COLS, min(SHEET_SIDE, max(h, w) * 3))
-        out.append(Figure(f"{folder}/ {layer}" if layer != "RGB" else f"{folder}/",
-                          pic.image_uri(sheet),
-                          f"{more} ({names[0]} ... {names[-1]}, row-major), each {w} x {h}; {captions[layer]}"))
+        out.append(
+            Figure(
+                f"{folder}/ {layer}" if layer != "RGB" else f"{folder}/",
+                pic.image_uri(sheet),
+                f"{more} ({names[0]} ... {names[-1]}, row-major), each {w} x {h}; {captions[layer]}",
+            )
+        )
     return out
 
 
@@ -148,16 +160,28 @@ def train_log_figures(path: Path, rel: str) -> list[Figure]:
         start += len(tr["loss"])
     series = [{"label": "loss", "y": loss}]
     if len(loss) >= 4 * SMOOTH:
-        series.append({"label": f"mean of {SMOOTH}", "y": moving_mean(loss, SMOOTH),
-                       "x": np.arange(SMOOTH - 1, len(loss))})
-    figs = [Figure(f"{rel}: loss", pic.data_uri(pic.curves_png(series, "training loss", "loss", log_y=True,
-                                                                 bounds=bounds), "image/png"),
-                   f"{len(loss)} iterations over {len(phases)} phase(s): "
-                   + ", ".join(f"{p.get('name')} ({len(p['train']['loss'])})" for p in phases))]
+        series.append(
+            {"label": f"mean of {SMOOTH}", "y": moving_mean(loss, SMOOTH), "x": np.arange(SMOOTH - 1, len(loss))}
+        )
+    figs = [
+        Figure(
+            f"{rel}: loss",
+            pic.data_uri(pic.curves_png(series, "training loss", "loss", log_y=True, bounds=bounds), "image/png"),
+            f"{len(loss)} iterations over {len(phases)} phase(s): "
+            + ", ".join(f"{p.get('name')} ({len(p['train']['loss'])})" for p in phases),
+        )
+    ]
     if count:
-        figs.append(Figure(f"{rel}: Gaussians", pic.data_uri(pic.curves_png(
-            [{"label": "Gaussians", "y": count}], "number of Gaussians", "count", bounds=bounds), "image/png"),
-            f"{count[0]} -> {count[-1]} Gaussians (densification and pruning)"))
+        figs.append(
+            Figure(
+                f"{rel}: Gaussians",
+                pic.data_uri(
+                    pic.curves_png([{"label": "Gaussians", "y": count}], "number of Gaussians", "count", bounds=bounds),
+                    "image/png",
+                ),
+                f"{count[0]} -> {count[-1]} Gaussians (densification and pruning)",
+            )
+        )
     return figs
 
 

@@ -5,6 +5,7 @@ The script runs on the window's load event and writes what loaded into ``<body>`
 ``data-images-broken`` (comma-separated titles); a broken image also gets a visible red label.
 Tests read these attributes from headless Chromium's ``--dump-dom``.
 """
+
 from __future__ import annotations
 
 import html
@@ -70,8 +71,10 @@ def badge(how: str | None) -> str:
 
 
 def figure_html(f: Figure) -> str:
-    return (f'<figure><img src="{f.uri}" alt="{esc(f.title)}" loading="eager">'
-            f'<figcaption><b>{esc(f.title)}</b> {esc(f.caption)}</figcaption></figure>')
+    return (
+        f'<figure><img src="{f.uri}" alt="{esc(f.title)}" loading="eager">'
+        f"<figcaption><b>{esc(f.title)}</b> {esc(f.caption)}</figcaption></figure>"
+    )
 
 
 def kv_table(d: dict[str, Any]) -> str:
@@ -89,14 +92,19 @@ def summary_table(run: RunInfo) -> str:
     """One row per stage: state, engine, wall / CPU seconds (with a bar), peak RSS, provenance."""
     walls = [float(s.record.get("wall_s") or 0) for s in run.stages]
     longest = max(walls + [1e-9])
-    head = ("<tr><th>stage</th><th>state</th><th>engine</th><th>wall s</th><th>CPU s</th><th>peak RSS MB</th>"
-            "<th>computed in run</th><th>key</th><th>outputs</th></tr>")
+    head = (
+        "<tr><th>stage</th><th>state</th><th>engine</th><th>wall s</th><th>CPU s</th><th>peak RSS MB</th>"
+        "<th>computed in run</th><th>key</th><th>outputs</th></tr>"
+    )
     rows = []
     for s, wall in zip(run.stages, walls):
         r = s.record
         if not s.ran:
-            rows.append(f"<tr><td><a href='#{esc(s.name)}'>{esc(s.name)}</a></td><td>{badge(None)}</td>"
-                        + "<td></td>" * 7 + "</tr>")
+            rows.append(
+                f"<tr><td><a href='#{esc(s.name)}'>{esc(s.name)}</a></td><td>{badge(None)}</td>"
+                + "<td></td>" * 7
+                + "</tr>"
+            )
             continue
         bar = f'<span class="bar" style="width:{max(1, round(120 * wall / longest))}px"></span>' if wall else ""
         size = sum(p.stat().st_size for p in s.files.values()) / 2**20
@@ -107,7 +115,8 @@ def summary_table(run: RunInfo) -> str:
             f"<td>{esc(engine_ran(r))}</td><td class=n>{bar}{fmt(r.get('wall_s', ''))}</td>"
             f"<td class=n>{fmt(r.get('cpu_s', ''))}</td><td class=n>{fmt(r.get('peak_rss_mb', ''))}</td>"
             f"<td>{esc(origin)}</td><td><code>{esc((s.key or '')[:12])}</code></td>"
-            f"<td class=n>{len(s.files)} files, {size:.2f} MiB</td></tr>")
+            f"<td class=n>{len(s.files)} files, {size:.2f} MiB</td></tr>"
+        )
     return f"<table>{head}{''.join(rows)}</table>"
 
 
@@ -124,15 +133,20 @@ def stage_section(s: StageInfo, figs: list[Figure], notes: list[str], metrics: d
     """A stage's section: state, provenance, params, metrics, pictures."""
     out = [f'<h2 id="{esc(s.name)}">{esc(s.name)} {badge(s.how)}</h2>']
     if not s.ran:
-        out.append('<p class="muted">not run: this run did not include the stage (e.g. <code>--until</code> '
-                   'or a failed step before it), so there is nothing to show.</p>')
+        out.append(
+            '<p class="muted">not run: this run did not include the stage (e.g. <code>--until</code> '
+            "or a failed step before it), so there is nothing to show.</p>"
+        )
         return "\n".join(out)
     r = s.record
     why = (r.get("meta", {}).get("engine") or {}) if isinstance(r.get("meta", {}).get("engine"), dict) else {}
-    facts = [f"engine <b>{esc(engine_ran(r) or '?')}</b>" + (f" ({esc(why['why'])})" if why.get("why") else ""),
-             f"program <code>{esc(r.get('program', '?'))}</code>",
-             f"device {esc(r.get('device', '?'))}", f"seed {esc(r.get('seed', '?'))}",
-             f"started {esc(r.get('started', '?'))}"]
+    facts = [
+        f"engine <b>{esc(engine_ran(r) or '?')}</b>" + (f" ({esc(why['why'])})" if why.get("why") else ""),
+        f"program <code>{esc(r.get('program', '?'))}</code>",
+        f"device {esc(r.get('device', '?'))}",
+        f"seed {esc(r.get('seed', '?'))}",
+        f"started {esc(r.get('started', '?'))}",
+    ]
     if r.get("host"):
         facts.append(f"on {esc(r['host'])} ({esc(r.get('executor') or 'local')})")
     if s.how == "used":
@@ -155,20 +169,35 @@ def document(run: RunInfo, sections: list[str], run_metrics: dict[str, Any], foo
     m = run.meta
     title = f"holoflow run {run.run_id}"
     state = "ok" if m.get("ok") else "failed or interrupted"
-    info = {"prompt": m.get("prompt"), "profile": m.get("profile"), "seed": m.get("seed"),
-            "finished": m.get("finished"), "seconds (run wall time)": m.get("seconds"), "state": state,
-            "pipeline": m.get("pipeline"), "run folder": str(run.run_dir)}
-    return "\n".join([
-        "<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>{esc(title)}</title><style>{CSS}</style></head><body>",
-        f"<h1>{esc(title)}</h1>", f'<p class="muted">{esc(m.get("prompt", ""))}</p>',
-        kv_table({k: v for k, v in info.items() if v is not None}),
-        "<h2>stages</h2>",
-        '<p class="muted">wall / CPU seconds and peak RSS are those of the step that computed the outputs '
-        "(for a cached stage, in the run named).</p>",
-        summary_table(run),
-        "<h2>metrics</h2>", '<p class="muted">numbers each step reported (its key record\'s meta); '
-        "more per stage below.</p>", kv_columns(run_metrics),
-        *sections,
-        f'<p class="muted" style="margin-top:30px">{esc(footer)}</p>',
-        f"<script>{SCRIPT}</script>", "</body></html>", ""])
+    info = {
+        "prompt": m.get("prompt"),
+        "profile": m.get("profile"),
+        "seed": m.get("seed"),
+        "finished": m.get("finished"),
+        "seconds (run wall time)": m.get("seconds"),
+        "state": state,
+        "pipeline": m.get("pipeline"),
+        "run folder": str(run.run_dir),
+    }
+    return "\n".join(
+        [
+            "<!DOCTYPE html>",
+            '<html lang="en"><head><meta charset="utf-8">',
+            f"<title>{esc(title)}</title><style>{CSS}</style></head><body>",
+            f"<h1>{esc(title)}</h1>",
+            f'<p class="muted">{esc(m.get("prompt", ""))}</p>',
+            kv_table({k: v for k, v in info.items() if v is not None}),
+            "<h2>stages</h2>",
+            '<p class="muted">wall / CPU seconds and peak RSS are those of the step that computed the outputs '
+            "(for a cached stage, in the run named).</p>",
+            summary_table(run),
+            "<h2>metrics</h2>",
+            '<p class="muted">numbers each step reported (its key record\'s meta); more per stage below.</p>',
+            kv_columns(run_metrics),
+            *sections,
+            f'<p class="muted" style="margin-top:30px">{esc(footer)}</p>',
+            f"<script>{SCRIPT}</script>",
+            "</body></html>",
+            "",
+        ]
+    )

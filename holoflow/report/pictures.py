@@ -4,6 +4,7 @@ their encoding as ``data:`` URIs. Pure functions of arrays; nothing here reads t
 Conventions: images handed around are uint8 [H, W, 3] sRGB, RGB order. EXR colour is linear light
 (docs/conventions.md) and goes through the sRGB curve; depth and disparity go through a colour map.
 """
+
 from __future__ import annotations
 
 import base64
@@ -13,7 +14,7 @@ import numpy as np
 
 from holoflow.imageops.color import linear_to_uint8, to_uint8
 
-NO_DATA = (40, 40, 40)   # colour of pixels without a value (sky in a depth map, NaN), sRGB uint8
+NO_DATA = (40, 40, 40)  # colour of pixels without a value (sky in a depth map, NaN), sRGB uint8
 
 
 def colour(rgb_linear: np.ndarray) -> np.ndarray:
@@ -47,7 +48,7 @@ def colour_map(values: np.ndarray, vmin: float | None = None, vmax: float | None
         vmax = hi if vmax is None else vmax
     finite = np.isfinite(values)
     t = np.clip((np.where(finite, values, vmin) - vmin) / max(vmax - vmin, 1e-12), 0.0, 1.0)
-    bgr = cv2.applyColorMap(to_uint8(t), cv2.COLORMAP_TURBO)          # [H, W, 3] BGR
+    bgr = cv2.applyColorMap(to_uint8(t), cv2.COLORMAP_TURBO)  # [H, W, 3] BGR
     out = bgr[..., ::-1].copy()
     out[~finite] = NO_DATA
     return out
@@ -81,8 +82,9 @@ def fit_box(img: np.ndarray, side: int) -> np.ndarray:
     return cv2.resize(img, size, interpolation=cv2.INTER_AREA if s < 1 else cv2.INTER_NEAREST)
 
 
-def mosaic(tiles: list[np.ndarray], cols: int, side: int, gap: int = 2,
-           background: tuple[int, int, int] = (255, 255, 255)) -> np.ndarray:
+def mosaic(
+    tiles: list[np.ndarray], cols: int, side: int, gap: int = 2, background: tuple[int, int, int] = (255, 255, 255)
+) -> np.ndarray:
     """Tiles (uint8 [h, w, 3], any sizes) fitted into ``side`` x ``side`` cells, row-major in a grid
     of ``cols`` columns with ``gap`` pixels between cells -> uint8 [rows * (side + gap) - gap, ...]."""
     if not tiles:
@@ -96,7 +98,7 @@ def mosaic(tiles: list[np.ndarray], cols: int, side: int, gap: int = 2,
         r, c = divmod(i, cols)
         y = r * (side + gap) + (side - t.shape[0]) // 2
         x = c * (side + gap) + (side - t.shape[1]) // 2
-        out[y:y + t.shape[0], x:x + t.shape[1]] = t
+        out[y : y + t.shape[0], x : x + t.shape[1]] = t
     return out
 
 
@@ -130,8 +132,14 @@ def image_uri(img: np.ndarray) -> str:
     return data_uri(encode(img, fmt), f"image/{fmt}")
 
 
-def curves_png(series: list[dict], title: str, ylabel: str, log_y: bool = False,
-               bounds: list[tuple[int, str]] = (), size: tuple[float, float] = (6.0, 2.6)) -> bytes:
+def curves_png(
+    series: list[dict],
+    title: str,
+    ylabel: str,
+    log_y: bool = False,
+    bounds: list[tuple[int, str]] = (),
+    size: tuple[float, float] = (6.0, 2.6),
+) -> bytes:
     """A line chart as PNG bytes. ``series``: [{"label", "y": [...], "x": [...] (optional)}];
     ``bounds``: (x, label) vertical markers (e.g. where a training phase starts)."""
     import io

@@ -3,6 +3,7 @@
 peak RSS, meta) and the files under ``runs/<id>/<stage>/``. Reads only; takes no lock (every file
 read is replaced atomically by the runner).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -21,11 +22,11 @@ class StageInfo:
     """One stage of the pipeline as the run saw it; ``how`` is None when the run did not include it."""
 
     name: str
-    how: str | None                        # ran | cached | cut off | used | None (not run)
+    how: str | None  # ran | cached | cut off | used | None (not run)
     key: str | None = None
-    record: dict[str, Any] = field(default_factory=dict)    # the key record's provenance ({} if none)
-    files: dict[str, Path] = field(default_factory=dict)    # output name -> path under runs/<id>/<stage>/
-    missing: list[str] = field(default_factory=list)        # outputs in run.json whose file is gone (gc'd)
+    record: dict[str, Any] = field(default_factory=dict)  # the key record's provenance ({} if none)
+    files: dict[str, Path] = field(default_factory=dict)  # output name -> path under runs/<id>/<stage>/
+    missing: list[str] = field(default_factory=list)  # outputs in run.json whose file is gone (gc'd)
 
     @property
     def ran(self) -> bool:
@@ -36,8 +37,8 @@ class StageInfo:
 class RunInfo:
     run_id: str
     run_dir: Path
-    meta: dict[str, Any]                   # run.json without "stages"
-    stages: list[StageInfo]                # pipeline order when the pipeline is known, else run.json order
+    meta: dict[str, Any]  # run.json without "stages"
+    stages: list[StageInfo]  # pipeline order when the pipeline is known, else run.json order
 
 
 def resolve_run(store: Store, run: str) -> Path:
@@ -45,8 +46,7 @@ def resolve_run(store: Store, run: str) -> Path:
     if run == "latest":
         link = store.root / "latest"
         if not link.exists():
-            raise ReportError(f"store {store.root} has no latest run; fix: `holoflow run` first, or pass "
-                              f"--store DIR")
+            raise ReportError(f"store {store.root} has no latest run; fix: `holoflow run` first, or pass --store DIR")
         return link.resolve()
     path = store.run_dir(run)
     if not (path / "run.json").is_file():
@@ -78,5 +78,11 @@ def _stage(store: Store, run_dir: Path, name: str, entry: dict | None) -> StageI
     folder = run_dir / name
     names = sorted(entry.get("outputs", {}))
     files = {rel: folder / rel for rel in names if (folder / rel).is_file()}
-    return StageInfo(name=name, how=entry.get("how"), key=key, record=record.get("provenance", {}), files=files,
-                     missing=[rel for rel in names if rel not in files])
+    return StageInfo(
+        name=name,
+        how=entry.get("how"),
+        key=key,
+        record=record.get("provenance", {}),
+        files=files,
+        missing=[rel for rel in names if rel not in files],
+    )

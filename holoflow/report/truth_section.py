@@ -1,6 +1,7 @@
 """The report's walking section: a run's scores against truth sets, as ``holoflow eval run RUN --truth DIR``
 left them in the run's ``eval/`` folder (``truth-<set>.json`` and one truth | render PNG per ring,
 holoflow.evaluation.truth_scores), so the eye can check the ring table."""
+
 from __future__ import annotations
 
 import json

@@ -3,12 +3,13 @@ check the numbers: source | render crops at the viewing size, and the novel view
 
 Pure functions of ``score_run``'s (scores, pictures); images are uint8 [H, W, 3] sRGB.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-EMPTY_RGB = (255, 0, 255)     # novel-view pixels with alpha below the threshold (nothing rendered there)
-GAP = 4                       # px of white between tiles
+EMPTY_RGB = (255, 0, 255)  # novel-view pixels with alpha below the threshold (nothing rendered there)
+GAP = 4  # px of white between tiles
 
 
 def pick_base(scores: dict) -> list[tuple[int, str]]:
@@ -22,8 +23,10 @@ def pick_base(scores: dict) -> list[tuple[int, str]]:
         out += [(side[0][1], "lowest PSNR"), (side[len(side) // 2][1], "median PSNR")]
     elev = b["elevation_deg"]
     if any(polar):
-        out += [(max(range(len(elev)), key=elev.__getitem__), "zenith"),
-                (min(range(len(elev)), key=elev.__getitem__), "nadir")]
+        out += [
+            (max(range(len(elev)), key=elev.__getitem__), "zenith"),
+            (min(range(len(elev)), key=elev.__getitem__), "nadir"),
+        ]
     return list(dict.fromkeys(out))
 
 
@@ -31,7 +34,7 @@ def crop(img: np.ndarray, side: int) -> np.ndarray:
     """The centre side x side px of uint8 [H, W, 3] at 1:1 (the whole image when smaller)."""
     h, w = img.shape[:2]
     y, x = max(0, (h - side) // 2), max(0, (w - side) // 2)
-    return img[y:y + side, x:x + side]
+    return img[y : y + side, x : x + side]
 
 
 def base_picture(scores: dict, pictures: dict, side: int = 256) -> tuple[np.ndarray, str]:
@@ -49,8 +52,10 @@ def base_picture(scores: dict, pictures: dict, side: int = 256) -> tuple[np.ndar
     sep = np.full((GAP, rows[0].shape[1], 3), 255, np.uint8)
     img = np.concatenate([x for r in rows for x in (r, sep)][:-1], 0)
     size = scores["spec"]["size"]
-    return img, (f"left: the source's view ({scores['source']}), right: the scene's render; centre {side} px of "
-                 f"the {size} px views at 1:1; rows: " + "; ".join(names))
+    return img, (
+        f"left: the source's view ({scores['source']}), right: the scene's render; centre {side} px of "
+        f"the {size} px views at 1:1; rows: " + "; ".join(names)
+    )
 
 
 def novel_picture(scores: dict, pictures: dict, distance: str = "0.5", side: int = 256) -> tuple[np.ndarray, str]:
@@ -72,10 +77,12 @@ def novel_picture(scores: dict, pictures: dict, distance: str = "0.5", side: int
         tiles = list(to_uint8(truth[sl])) + tiles
     cols = min(per, 4)
     r = scores["novel"][distance]
-    cap = (f"{per} novel cameras {distance} m off centre (mean {r['offset_m']:.2f} m), looking toward the near "
-           f"wall / right / back / left in turn; magenta = empty (alpha < {scores['spec']['empty_alpha']}), "
-           f"{100 * r['empty']:.2f} % of the pixels"
-           + (f"; first the {per} true views, then the {per} renders, in the same order" if truth is not None else ""))
+    cap = (
+        f"{per} novel cameras {distance} m off centre (mean {r['offset_m']:.2f} m), looking toward the near "
+        f"wall / right / back / left in turn; magenta = empty (alpha < {scores['spec']['empty_alpha']}), "
+        f"{100 * r['empty']:.2f} % of the pixels"
+        + (f"; first the {per} true views, then the {per} renders, in the same order" if truth is not None else "")
+    )
     return mosaic(tiles, cols, side, gap=GAP), cap
 
 
@@ -92,5 +99,10 @@ def section_html(scores: dict, pictures: dict, profile: str | None) -> str:
     if "0.5" in scores["novel"]:
         img, cap = novel_picture(scores, pictures)
         figs.append(Figure("novel cameras 0.5 m off centre", image_uri(img), cap))
-    return "\n".join([f'<h2 id="viewing">what people see ({scores["spec"]["size"]} px)</h2>',
-                      f"<pre>{esc(chr(10).join(table(scores, profile)))}</pre>", *map(figure_html, figs)])
+    return "\n".join(
+        [
+            f'<h2 id="viewing">what people see ({scores["spec"]["size"]} px)</h2>',
+            f"<pre>{esc(chr(10).join(table(scores, profile)))}</pre>",
+            *map(figure_html, figs),
+        ]
+    )

@@ -4,10 +4,16 @@ The embedded default of the base_pano stage, and the ground truth of every later
 rendered from ANY camera (``render_pinhole``), with exact depth. See docs/panorama.md. Names are
 imported lazily, so ``holoflow.scene.model`` (scene.json I/O) does not pull in torch.
 """
+
 from importlib import import_module
 
-_API = {"Scene": "model", "scene_from_prompt": "generate", "render_equirect": "render",
-        "render_pinhole": "render", "cast": "shade"}
+_API = {
+    "Scene": "model",
+    "scene_from_prompt": "generate",
+    "render_equirect": "render",
+    "render_pinhole": "render",
+    "cast": "shade",
+}
 __all__ = sorted(_API)
 
 

@@ -1,4 +1,5 @@
 """base_pano's parameters and engines (stages/base_pano.py). Imports nothing heavy."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -15,7 +16,8 @@ class BasePanoParams(StageParams):
         "engine(prompt: str, cfg: BasePanoParams, seed: int, device: str, progress) -> Panorama",
         weights={"diffusion360": (("model", "diffusion360"),)},
         procedural="holoflow.scene.pano:procedural_pano",
-        diffusion360="holoflow.networks.diffusion360:base_pano_engine")
+        diffusion360="holoflow.networks.diffusion360:base_pano_engine",
+    )
 
     width: int = param(1024, "panorama width", "px", ge=1)
     height: int = param(512, "panorama height (width / 2)", "px", ge=1)

@@ -5,6 +5,7 @@ holoflow.scene.vocab; every random choice comes from one numpy Generator seeded 
 prompt), so the same prompt and seed always give the same Scene. Coordinates: +x right, +y down,
 +z forward, metres; the camera is at the origin, the floor / ground at ``y = eye_height``.
 """
+
 from __future__ import annotations
 
 import math
@@ -17,8 +18,8 @@ import numpy as np
 from holoflow.scene import vocab
 from holoflow.scene.model import Box, Cylinder, Effects, Ellipsoid, Ground, Material, PointLight, Room, Scene, Sky, Vec3
 
-EYE_HEIGHT = 1.6          # metres above the floor / ground
-CAMERA_CLEARANCE = 0.5    # metres: nothing is placed closer to the camera than this
+EYE_HEIGHT = 1.6  # metres above the floor / ground
+CAMERA_CLEARANCE = 0.5  # metres: nothing is placed closer to the camera than this
 
 
 def tokens(prompt: str) -> list[str]:
@@ -84,12 +85,13 @@ class _Builder:
         self.cylinders: list[Cylinder] = []
         self.lights: list[PointLight] = []
         self.objects: list[str] = []
-        self.footprints: list[tuple[float, float, float]] = []   # (x, z, radius) on the floor
+        self.footprints: list[tuple[float, float, float]] = []  # (x, z, radius) on the floor
         self.footprints_mounted: list[tuple[float, float, float]] = []  # wall-mounted: (x, z, half width)
 
     def material(self, kind: str, color, color2, scale: float = 1.0, emission: float = 0.0) -> int:
-        self.materials.append(Material(kind, _v(color), _v(color2), _r(scale), _r(emission),
-                                       int(self.rng.integers(0, 1 << 16))))
+        self.materials.append(
+            Material(kind, _v(color), _v(color2), _r(scale), _r(emission), int(self.rng.integers(0, 1 << 16)))
+        )
         return len(self.materials) - 1
 
     def box(self, center, half, yaw: float, mat: int) -> None:
@@ -101,13 +103,14 @@ class _Builder:
     def cylinder(self, center, radius: float, half_height: float, mat: int) -> None:
         self.cylinders.append(Cylinder(_v(center), _r(radius), _r(half_height), mat))
 
-    def free(self, x: float, z: float, radius: float, half: tuple[float, float] | None = None,
-             yaw: float = 0.0) -> bool:
+    def free(
+        self, x: float, z: float, radius: float, half: tuple[float, float] | None = None, yaw: float = 0.0
+    ) -> bool:
         """Is the floor disk (x, z, radius) clear of placed objects, and the object (its rectangle of
         half sizes ``half`` turned by ``yaw``, else the disk) clear of the camera?"""
         if half is None:
             cam = math.hypot(x, z) - radius
-        else:                                   # distance from the camera to the rotated rectangle
+        else:  # distance from the camera to the rotated rectangle
             c, s = math.cos(yaw), math.sin(yaw)
             lx, lz = -(c * x - s * z), -(s * x + c * z)
             cam = math.hypot(max(abs(lx) - half[0], 0.0), max(abs(lz) - half[1], 0.0))
@@ -128,8 +131,9 @@ def _jitter(rng: np.random.Generator, rgb, amount: float = 0.12) -> Vec3:
     return tuple(float(np.clip(c * (1.0 + amount * (rng.random() * 2 - 1)), 0.0, 0.95)) for c in rgb)
 
 
-def _surface(b: _Builder, w: Words, target: str, default_word: str, emission: float = 0.0,
-             color=None, loose: bool = False) -> int:
+def _surface(
+    b: _Builder, w: Words, target: str, default_word: str, emission: float = 0.0, color=None, loose: bool = False
+) -> int:
     """Material for a scene part: the prompt's material / colour words for ``target`` win over defaults."""
     slot = w.attrs.get(target, {})
     word = slot.get("material") or (w.loose_material if loose else None) or default_word
@@ -160,7 +164,7 @@ def _sky(w: Words, rng: np.random.Generator, indoor: bool) -> tuple[Sky, str, Ve
     if sky_col is not None:
         zenith = tuple(0.7 * z + 0.3 * c for z, c in zip(zenith, sky_col))
         horizon = tuple(0.4 * h + 0.6 * c for h, c in zip(horizon, sky_col))
-    if clouds >= 0.85:                                 # overcast: the sun goes soft, the sky grey
+    if clouds >= 0.85:  # overcast: the sun goes soft, the sky grey
         sun_rad = tuple(0.25 * s for s in sun_rad)
         ambient = tuple(1.5 * a for a in ambient)
         grey = float(np.mean(horizon))
@@ -170,8 +174,7 @@ def _sky(w: Words, rng: np.random.Generator, indoor: bool) -> tuple[Sky, str, Ve
     sun_dir = (math.cos(el) * math.sin(az), -math.sin(el), math.cos(el) * math.cos(az))
     night = time == "night"
     sun_color = (0.7, 0.75, 0.85) if night else tuple(s / max(sun_rad) for s in sun_rad)
-    sky = Sky(time, _v(zenith), _v(horizon), _v(sun_dir), _v(sun_color), 0.02 if night else 0.012,
-              _r(clouds), night)
+    sky = Sky(time, _v(zenith), _v(horizon), _v(sun_dir), _v(sun_color), 0.02 if night else 0.012, _r(clouds), night)
     return sky, time, _v(ambient), _v((0.0, 0.0, 0.0) if indoor else sun_rad)
 
 
@@ -188,8 +191,9 @@ def _effects(w: Words, sky: Sky, indoor: bool) -> Effects:
     night = sky.time == "night"
     fog_color = tuple(0.5 * h + 0.5 * z for h, z in zip(sky.horizon, sky.zenith))
     fog_color = tuple(0.6 * f + 0.4 * float(np.mean(fog_color)) for f in fog_color)
-    return Effects(_r(fog), _v(fog_color), bool(shadows), bool(lights), night,
-                   on + shadows + lights + (["night"] if night else []))
+    return Effects(
+        _r(fog), _v(fog_color), bool(shadows), bool(lights), night, on + shadows + lights + (["night"] if night else [])
+    )
 
 
 # ----------------------------------------------------------------------------------------- indoor
@@ -240,7 +244,7 @@ def _room(b: _Builder, w: Words, kind: str) -> tuple[Room, list[_Wall], tuple[fl
         room = Room("round", [], _r(radius), _r(floor_y), _r(ceiling_y), floor_m, wall_m, ceil_m)
         n = 10
         walls = []
-        for k in range(n):                       # chords just inside the circle
+        for k in range(n):  # chords just inside the circle
             a0, a1 = 2 * math.pi * k / n, 2 * math.pi * (k + 1) / n
             rr = radius * math.cos(math.pi / n) - 0.02
             p0 = (rr * math.sin(a0), rr * math.cos(a0))
@@ -254,40 +258,61 @@ def _room(b: _Builder, w: Words, kind: str) -> tuple[Room, list[_Wall], tuple[fl
     cz = rng.uniform(-0.5, 0.5) * max(depth - 2.4, 0.0)
     x0, x1, z0, z1 = -width / 2 - cx, width / 2 - cx, -depth / 2 - cz, depth / 2 - cz
     boxes = [[x0, x1, z0, z1]]
-    walls = [_Wall((x0, z0), (x1, z0), (0, 1)), _Wall((x1, z0), (x1, z1), (-1, 0)),
-             _Wall((x1, z1), (x0, z1), (0, -1)), _Wall((x0, z1), (x0, z0), (1, 0))]
+    walls = [
+        _Wall((x0, z0), (x1, z0), (0, 1)),
+        _Wall((x1, z0), (x1, z1), (-1, 0)),
+        _Wall((x1, z1), (x0, z1), (0, -1)),
+        _Wall((x0, z1), (x0, z0), (1, 0)),
+    ]
     shape = "box"
     if w.has(*vocab.LSHAPE):
         shape = "L"
         ext, wing = width * rng.uniform(0.6, 1.0), depth * rng.uniform(0.4, 0.6)
-        if rng.random() < 0.5:                   # wing on the +x side, at the far (+z) end
+        if rng.random() < 0.5:  # wing on the +x side, at the far (+z) end
             boxes.append([x1 - 0.01, x1 + ext, z1 - wing, z1])
             walls = [wl for k, wl in enumerate(walls) if k != 1]
-        else:                                    # wing on the -x side
+        else:  # wing on the -x side
             boxes.append([x0 - ext, x0 + 0.01, z1 - wing, z1])
             walls = [wl for k, wl in enumerate(walls) if k != 3]
-    room = Room(shape, [[_r(v) for v in bx] for bx in boxes], 0.0, _r(floor_y), _r(ceiling_y),
-                floor_m, wall_m, ceil_m)
+    room = Room(shape, [[_r(v) for v in bx] for bx in boxes], 0.0, _r(floor_y), _r(ceiling_y), floor_m, wall_m, ceil_m)
     return room, walls, (x0 + 0.3, x1 - 0.3, z0 + 0.3, z1 - 0.3)
 
 
 def _wall_color(rng: np.random.Generator, wall_word: str):
     if wall_word != "plaster":
         return None
-    palette = [(0.72, 0.68, 0.58), (0.62, 0.66, 0.62), (0.70, 0.60, 0.50), (0.58, 0.62, 0.70),
-               (0.75, 0.73, 0.70), (0.65, 0.52, 0.42)]
+    palette = [
+        (0.72, 0.68, 0.58),
+        (0.62, 0.66, 0.62),
+        (0.70, 0.60, 0.50),
+        (0.58, 0.62, 0.70),
+        (0.75, 0.73, 0.70),
+        (0.65, 0.52, 0.42),
+    ]
     return palette[int(rng.integers(len(palette)))]
 
 
 # furniture: name -> (width, depth, against a wall?, wall-mounted?)
 _FURNITURE = {
-    "sofa": (2.0, 0.9, True, False), "armchair": (0.9, 0.85, True, False), "bed": (1.6, 2.1, True, False),
-    "nightstand": (0.5, 0.45, True, False), "wardrobe": (1.2, 0.6, True, False),
-    "shelves": (1.0, 0.35, True, False), "cabinet": (1.4, 0.5, True, False), "counter": (2.4, 0.62, True, False),
-    "desk": (1.4, 0.7, True, False), "bathtub": (1.7, 0.75, True, False), "plant": (0.6, 0.6, True, False),
-    "lamp": (0.45, 0.45, True, False), "painting": (1.0, 0.05, True, True), "window": (1.4, 0.04, True, True),
-    "table": (1.4, 0.9, False, False), "coffee_table": (1.0, 0.6, False, False), "chair": (0.5, 0.5, False, False),
-    "bench": (1.8, 0.45, False, False), "rug": (2.2, 1.5, False, False),
+    "sofa": (2.0, 0.9, True, False),
+    "armchair": (0.9, 0.85, True, False),
+    "bed": (1.6, 2.1, True, False),
+    "nightstand": (0.5, 0.45, True, False),
+    "wardrobe": (1.2, 0.6, True, False),
+    "shelves": (1.0, 0.35, True, False),
+    "cabinet": (1.4, 0.5, True, False),
+    "counter": (2.4, 0.62, True, False),
+    "desk": (1.4, 0.7, True, False),
+    "bathtub": (1.7, 0.75, True, False),
+    "plant": (0.6, 0.6, True, False),
+    "lamp": (0.45, 0.45, True, False),
+    "painting": (1.0, 0.05, True, True),
+    "window": (1.4, 0.04, True, True),
+    "table": (1.4, 0.9, False, False),
+    "coffee_table": (1.0, 0.6, False, False),
+    "chair": (0.5, 0.5, False, False),
+    "bench": (1.8, 0.45, False, False),
+    "rug": (2.2, 1.5, False, False),
 }
 
 
@@ -317,7 +342,7 @@ def _indoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Room, li
 def _indoor_items(w: Words, kind: str, walls: list[_Wall], effects: Effects) -> list[str]:
     """What the room holds: its kind's furniture, what the prompt names, a lamp when lit."""
     items = list(vocab.ROOM_KINDS[kind][2])
-    if kind == "library":                       # shelves along the walls, as many as fit
+    if kind == "library":  # shelves along the walls, as many as fit
         items += ["shelves"] * int(sum(wl.length for wl in walls) / 2.5)
     for x in w.words:
         f = vocab.FURNITURE.get(x)
@@ -333,23 +358,37 @@ def _indoor_materials(b: _Builder, w: Words, sky: Sky, effects: Effects) -> dict
     rng = b.rng
     return {
         "wood": _surface(b, w, "table", "wood"),
-        "fabric": _surface(b, w, "sofa", "fabric", color=_pick(rng, [(0.25, 0.28, 0.32), (0.45, 0.12, 0.08),
-                                                                    (0.12, 0.2, 0.3), (0.35, 0.3, 0.22)])),
+        "fabric": _surface(
+            b,
+            w,
+            "sofa",
+            "fabric",
+            color=_pick(rng, [(0.25, 0.28, 0.32), (0.45, 0.12, 0.08), (0.12, 0.2, 0.3), (0.35, 0.3, 0.22)]),
+        ),
         "bed": _surface(b, w, "bed", "linen"),
         "cabinet": _surface(b, w, "cabinet", "oak"),
         "shelves": _surface(b, w, "shelves", "walnut"),
         "metal": b.material("metal", (0.12, 0.12, 0.13), (0.08, 0.08, 0.08)),
         "white": b.material("plain", (0.78, 0.78, 0.76), (0.7, 0.7, 0.7)),
-        "rug": _surface(b, w, "rug", "carpet", color=_pick(rng, [(0.35, 0.08, 0.06), (0.1, 0.15, 0.3),
-                                                                (0.45, 0.35, 0.2), (0.2, 0.25, 0.15)])),
+        "rug": _surface(
+            b,
+            w,
+            "rug",
+            "carpet",
+            color=_pick(rng, [(0.35, 0.08, 0.06), (0.1, 0.15, 0.3), (0.45, 0.35, 0.2), (0.2, 0.25, 0.15)]),
+        ),
         "leaves": b.material("leaves", (0.05, 0.2, 0.04), (0.12, 0.3, 0.06), 0.4),
         "pot": b.material("plain", (0.45, 0.18, 0.08), (0.3, 0.1, 0.05)),
         "painting": b.material("painting", (0.5, 0.4, 0.3), (0.1, 0.08, 0.05), 0.6),
         "marble": b.material("marble", (0.8, 0.78, 0.74), (0.25, 0.25, 0.27), 0.4),
-        "shade": b.material("glow" if effects.lights else "fabric", (0.95, 0.85, 0.6), (0.8, 0.7, 0.5),
-                            1.0, 3.0 if effects.lights else 0.0),
-        "window": b.material("window", tuple(min(1.0, 1.6 * c) for c in sky.horizon), (0.85, 0.85, 0.82),
-                             0.45, 1.0),
+        "shade": b.material(
+            "glow" if effects.lights else "fabric",
+            (0.95, 0.85, 0.6),
+            (0.8, 0.7, 0.5),
+            1.0,
+            3.0 if effects.lights else 0.0,
+        ),
+        "window": b.material("window", tuple(min(1.0, 1.6 * c) for c in sky.horizon), (0.85, 0.85, 0.82), 0.45, 1.0),
         "books": b.material("books", (0.3, 0.16, 0.07), (0.3, 0.16, 0.07), 0.4),
     }
 
@@ -400,7 +439,7 @@ def _ceiling_light(b: _Builder, room: Room, area, mats: dict[str, int]) -> None:
     room is lit."""
     cx, cz = 0.5 * (area[0] + area[1]), 0.5 * (area[2] + area[3])
     r = math.hypot(cx, cz)
-    if r < 1.2:                              # not right above the camera
+    if r < 1.2:  # not right above the camera
         ux, uz = (cx / r, cz / r) if r > 1e-6 else (0.0, 1.0)
         cx, cz = 1.2 * ux, 1.2 * uz
     y = room.ceiling_y + 0.35
@@ -413,8 +452,9 @@ def _pick(rng: np.random.Generator, options: list):
     return options[int(rng.integers(len(options)))]
 
 
-def _box_local(b: _Builder, f: _Frame, lx: float, bottom: float, lz: float, hx: float, hy: float, hz: float,
-               mat: int) -> None:
+def _box_local(
+    b: _Builder, f: _Frame, lx: float, bottom: float, lz: float, hx: float, hy: float, hz: float, mat: int
+) -> None:
     """Box in the object frame: centre (lx, lz) on the floor plane, from ``bottom`` up by 2*hy."""
     b.box(f.at(lx, bottom + hy, lz), (hx, hy, hz), f.yaw, mat)
 
@@ -540,19 +580,53 @@ def _rug(b, f, m, room):
     _box_local(b, f, 0, 0.0, 0, 1.1, 0.006, 0.75, m["rug"])
 
 
-_BUILD = {"sofa": _sofa, "armchair": _armchair, "bed": _bed, "nightstand": _nightstand, "wardrobe": _wardrobe,
-          "shelves": _shelves, "cabinet": _cabinet, "counter": _counter, "desk": _desk, "bathtub": _bathtub,
-          "plant": _plant, "lamp": _lamp, "painting": _painting, "window": _window, "table": _table,
-          "coffee_table": _coffee_table, "chair": _chair, "bench": _bench, "rug": _rug}
+_BUILD = {
+    "sofa": _sofa,
+    "armchair": _armchair,
+    "bed": _bed,
+    "nightstand": _nightstand,
+    "wardrobe": _wardrobe,
+    "shelves": _shelves,
+    "cabinet": _cabinet,
+    "counter": _counter,
+    "desk": _desk,
+    "bathtub": _bathtub,
+    "plant": _plant,
+    "lamp": _lamp,
+    "painting": _painting,
+    "window": _window,
+    "table": _table,
+    "coffee_table": _coffee_table,
+    "chair": _chair,
+    "bench": _bench,
+    "rug": _rug,
+}
 
 
 # ----------------------------------------------------------------------------------------- outdoor
-_TREES = {"forest": 40, "park": 12, "lake": 10, "village": 8, "mountain": 8, "snow": 8, "beach": 4, "city": 6,
-          "desert": 0}
-_ROCKS = {"desert": 12, "mountain": 14, "beach": 6, "park": 3, "forest": 5, "snow": 5, "lake": 6, "village": 2,
-          "city": 0}
-_HILLS = {"park": 5, "forest": 4, "lake": 4, "village": 4, "mountain": 3, "snow": 4, "desert": 6, "beach": 1,
-          "city": 0}
+_TREES = {
+    "forest": 40,
+    "park": 12,
+    "lake": 10,
+    "village": 8,
+    "mountain": 8,
+    "snow": 8,
+    "beach": 4,
+    "city": 6,
+    "desert": 0,
+}
+_ROCKS = {
+    "desert": 12,
+    "mountain": 14,
+    "beach": 6,
+    "park": 3,
+    "forest": 5,
+    "snow": 5,
+    "lake": 6,
+    "village": 2,
+    "city": 0,
+}
+_HILLS = {"park": 5, "forest": 4, "lake": 4, "village": 4, "mountain": 3, "snow": 4, "desert": 6, "beach": 1, "city": 0}
 
 
 def _outdoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Ground, list[str]]:
@@ -562,8 +636,16 @@ def _outdoor(b: _Builder, w: Words, sky: Sky, effects: Effects) -> tuple[Ground,
     biome = biomes[0] if biomes else "park"
     ground, water = _ground(b, w, biome)
     spot = _spotter(b, ground)
-    placed = [biome, water, _hills(b, w, biome, spot), _mountains(b, w, biome), _trees(b, w, biome, spot),
-              _rocks(b, w, biome, spot), _buildings(b, w, biome, effects, spot), _lamps(b, effects, spot)]
+    placed = [
+        biome,
+        water,
+        _hills(b, w, biome, spot),
+        _mountains(b, w, biome),
+        _trees(b, w, biome, spot),
+        _rocks(b, w, biome, spot),
+        _buildings(b, w, biome, effects, spot),
+        _lamps(b, effects, spot),
+    ]
     return ground, [name for name in placed if name]
 
 
@@ -601,7 +683,7 @@ def _spotter(b: _Builder, ground: Ground):
 
     def spot(rmin, rmax, radius):
         for _ in range(30):
-            az, d = rng.uniform(-math.pi, math.pi), math.sqrt(rng.uniform(rmin ** 2, rmax ** 2))
+            az, d = rng.uniform(-math.pi, math.pi), math.sqrt(rng.uniform(rmin**2, rmax**2))
             x, z = d * math.sin(az), d * math.cos(az)
             if dry(x, z, radius) and b.free(x, z, radius):
                 b.footprints.append((x, z, radius))
@@ -628,7 +710,7 @@ def _mountains(b: _Builder, w: Words, biome: str) -> str | None:
     rng, gy = b.rng, EYE_HEIGHT
     rock_m = _surface(b, w, "mountain", "mountain")
     snow_m = b.material("snow", (0.62, 0.64, 0.68), (0.5, 0.54, 0.62), 4.0)
-    for k in range(7):                       # a ring of peaks: tall ellipsoids with snow caps
+    for k in range(7):  # a ring of peaks: tall ellipsoids with snow caps
         az = 2 * math.pi * k / 7 + rng.uniform(-0.3, 0.3)
         d, r = rng.uniform(450.0, 700.0), rng.uniform(110.0, 200.0)
         hgt = rng.uniform(1.4, 2.2) * r
@@ -644,8 +726,11 @@ def _trees(b: _Builder, w: Words, biome: str, spot) -> str | None:
         return None
     rng, gy = b.rng, EYE_HEIGHT
     autumn = w.has("autumn", "fall")
-    colors = ([(0.6, 0.2, 0.03), (0.7, 0.45, 0.05), (0.45, 0.08, 0.03)] if autumn
-              else [_color(b, w, "tree", (0.04, 0.18, 0.03))])
+    colors = (
+        [(0.6, 0.2, 0.03), (0.7, 0.45, 0.05), (0.45, 0.08, 0.03)]
+        if autumn
+        else [_color(b, w, "tree", (0.04, 0.18, 0.03))]
+    )
     palette = [b.material("leaves", c, tuple(0.6 * x for x in c), 1.0) for c in colors]
     bark = b.material("bark", (0.16, 0.1, 0.06), (0.08, 0.05, 0.03), 1.0)
     conifer = biome in ("snow", "mountain") or w.has("pine", "pines", "conifer", "spruce")
@@ -676,14 +761,14 @@ def _rocks(b: _Builder, w: Words, biome: str, spot) -> str | None:
         r = rng.uniform(0.3, 2.0)
         at = spot(3.0, 60.0, r)
         if at:
-            b.ellipsoid((at[0], gy - r * 0.25, at[1]), (r, r * rng.uniform(0.4, 0.8), r * rng.uniform(0.7, 1.2)),
-                        rock_m)
+            b.ellipsoid(
+                (at[0], gy - r * 0.25, at[1]), (r, r * rng.uniform(0.4, 0.8), r * rng.uniform(0.7, 1.2)), rock_m
+            )
     return "rocks"
 
 
 def _buildings(b: _Builder, w: Words, biome: str, effects: Effects, spot) -> str | None:
-    houses = biome == "village" or w.has("house", "houses", "cottage", "cabin", "farm", "farmhouse", "village",
-                                         "town")
+    houses = biome == "village" or w.has("house", "houses", "cottage", "cabin", "farm", "farmhouse", "village", "town")
     city = biome == "city" or w.has("building", "buildings", "skyscraper", "skyscrapers", "tower", "towers")
     if not (houses or city):
         return None
@@ -751,8 +836,22 @@ def scene_from_prompt(prompt: str, seed: int) -> Scene:
         ground, names = _outdoor(b, w, sky, effects)
     key = (0.4, -0.7, 0.6)
     kn = math.sqrt(sum(k * k for k in key))
-    return Scene(prompt=prompt, seed=int(seed), kind="indoor" if indoor else "outdoor", eye_height=EYE_HEIGHT,
-                 materials=b.materials, sky=sky, effects=effects, ambient=_v(ambient),
-                 key_light=_v(tuple(k / kn for k in key)) if indoor else (0.0, 0.0, 0.0),
-                 sun_light=sun_light, room=room, ground=ground, boxes=b.boxes, ellipsoids=b.ellipsoids,
-                 cylinders=b.cylinders, lights=b.lights if effects.lights else [], objects=names)
+    return Scene(
+        prompt=prompt,
+        seed=int(seed),
+        kind="indoor" if indoor else "outdoor",
+        eye_height=EYE_HEIGHT,
+        materials=b.materials,
+        sky=sky,
+        effects=effects,
+        ambient=_v(ambient),
+        key_light=_v(tuple(k / kn for k in key)) if indoor else (0.0, 0.0, 0.0),
+        sun_light=sun_light,
+        room=room,
+        ground=ground,
+        boxes=b.boxes,
+        ellipsoids=b.ellipsoids,
+        cylinders=b.cylinders,
+        lights=b.lights if effects.lights else [],
+        objects=names,
+    )

@@ -5,6 +5,7 @@ metres. The camera sits at the origin; the floor / ground is the plane ``y = eye
 the eye). Colours are linear-light albedos in [0, 1]. Primitives name their material by index into
 ``Scene.materials`` so the renderer can shade every hit of one material in one vectorised pass.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -120,10 +121,10 @@ class PointLight:
 class Effects:
     """What the prompt asked for; each is off unless a word turned it on (docs/panorama.md)."""
 
-    fog: float = 0.0              # exponential fog density, 1/m (0 = off)
+    fog: float = 0.0  # exponential fog density, 1/m (0 = off)
     fog_color: Vec3 = (0.0, 0.0, 0.0)
-    shadows: bool = False         # sun / moon shadow rays
-    lights: bool = False          # point lights (lamps)
+    shadows: bool = False  # sun / moon shadow rays
+    lights: bool = False  # point lights (lamps)
     night: bool = False
     words: list[str] = field(default_factory=list)  # the prompt words that switched effects on
 
@@ -140,8 +141,8 @@ class Scene:
     sky: Sky
     effects: Effects
     ambient: Vec3
-    key_light: Vec3               # soft indoor fill direction (unit, towards the light), no shadows
-    sun_light: Vec3               # directional sun / moon radiance (zero indoors)
+    key_light: Vec3  # soft indoor fill direction (unit, towards the light), no shadows
+    sun_light: Vec3  # directional sun / moon radiance (zero indoors)
     room: Room | None = None
     ground: Ground | None = None
     boxes: list[Box] = field(default_factory=list)
@@ -169,8 +170,7 @@ def _build(tp, value):
         return _build(inner[0], value)
     if dataclasses.is_dataclass(tp):
         hints = typing.get_type_hints(tp)
-        return tp(**{f.name: _build(hints[f.name], value[f.name]) for f in dataclasses.fields(tp)
-                     if f.name in value})
+        return tp(**{f.name: _build(hints[f.name], value[f.name]) for f in dataclasses.fields(tp) if f.name in value})
     if origin is list:
         (arg,) = typing.get_args(tp)
         return [_build(arg, v) for v in value]

@@ -5,6 +5,7 @@ pinhole K with pixel centres at +0.5 and a world-to-camera ``viewmat`` (OpenCV a
 edge-adaptive: every pixel casts its centre ray (which also gives the depth), and pixels whose colour
 or depth differs from a neighbour's are re-rendered as the mean of ``samples x samples`` sub-pixel rays.
 """
+
 from __future__ import annotations
 
 from typing import Callable
@@ -15,14 +16,15 @@ import torch
 from holoflow.scene.model import Scene
 from holoflow.scene.shade import cast
 
-RayFn = Callable[[int, int], tuple[torch.Tensor, torch.Tensor]]   # (h, w) -> origins, dirs [h, w, 3]
+RayFn = Callable[[int, int], tuple[torch.Tensor, torch.Tensor]]  # (h, w) -> origins, dirs [h, w, 3]
 
-COLOR_STEP = 0.04     # sqrt-colour difference that triggers supersampling
-DEPTH_STEP = 0.03     # relative depth difference that triggers supersampling
+COLOR_STEP = 0.04  # sqrt-colour difference that triggers supersampling
+DEPTH_STEP = 0.03  # relative depth difference that triggers supersampling
 
 
-def render_equirect(scene: Scene, width: int, height: int, samples: int = 2, device: str | None = None
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def render_equirect(
+    scene: Scene, width: int, height: int, samples: int = 2, device: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Equirect panorama from the origin: linear RGB [H, W, 3] float32 and radial depth [H, W] float32
     (metres along the ray, +inf for sky). ``device``: torch device to trace on (default CPU)."""
     from holoflow.geometry.sphere import equirect_directions
@@ -35,8 +37,9 @@ def render_equirect(scene: Scene, width: int, height: int, samples: int = 2, dev
     return rgb, t
 
 
-def render_pinhole(scene: Scene, K, viewmat, width: int, height: int, samples: int = 1,
-                   device: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+def render_pinhole(
+    scene: Scene, K, viewmat, width: int, height: int, samples: int = 1, device: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Pinhole view from any camera: linear RGB [H, W, 3] float32 and z-depth [H, W] float32 (metres
     along the camera's optical axis, +inf where nothing is hit). K [3, 3] pixels, viewmat [4, 4]
     world-to-camera (OpenCV axes); numpy arrays or tensors."""
@@ -47,20 +50,21 @@ def render_pinhole(scene: Scene, K, viewmat, width: int, height: int, samples: i
 
     def rays(h: int, w: int):
         Ks = K.clone()
-        Ks[0] *= w / width                                   # the same view on an h x w pixel grid
+        Ks[0] *= w / width  # the same view on an h x w pixel grid
         Ks[1] *= h / height
         o, d = pinhole_rays(Ks, viewmat, h, w)
         return o.to(torch.float32), d.to(torch.float32)
 
     rgb, t = _render(scene, rays, width, height, samples, wrap=False)
     _, d = rays(height, width)
-    forward = viewmat[2, :3].to(torch.float32)               # camera +z in world coordinates
+    forward = viewmat[2, :3].to(torch.float32)  # camera +z in world coordinates
     cos = (d.reshape(-1, 3) * forward).sum(1).reshape(height, width).cpu().numpy()
     return rgb, (t * cos).astype(np.float32)
 
 
-def _render(scene: Scene, rays: RayFn, width: int, height: int, samples: int, wrap: bool
-            ) -> tuple[np.ndarray, np.ndarray]:
+def _render(
+    scene: Scene, rays: RayFn, width: int, height: int, samples: int, wrap: bool
+) -> tuple[np.ndarray, np.ndarray]:
     """Centre ray per pixel, then ``samples``^2 sub-pixel rays where an edge needs them."""
     if width < 1 or height < 1 or samples < 1:
         raise ValueError(f"render: need width, height, samples >= 1, got {width}x{height}, {samples}")
@@ -68,10 +72,10 @@ def _render(scene: Scene, rays: RayFn, width: int, height: int, samples: int, wr
     rgb, t = cast(scene, o.reshape(-1, 3), d.reshape(-1, 3))
     rgb, t = rgb.reshape(height, width, 3), t.reshape(height, width)
     if samples > 1:
-        flag = needs_supersampling(rgb, t, wrap)                               # [H, W]
+        flag = needs_supersampling(rgb, t, wrap)  # [H, W]
         rows, cols = flag.nonzero(as_tuple=True)
         if len(rows):
-            fo, fd = rays(height * samples, width * samples)                  # [H s, W s, 3]
+            fo, fd = rays(height * samples, width * samples)  # [H s, W s, 3]
             sub = torch.arange(samples, device=rows.device)
             fr = (rows[:, None, None] * samples + sub[None, :, None]).expand(-1, samples, samples)
             fc = (cols[:, None, None] * samples + sub[None, None, :]).expand(-1, samples, samples)
@@ -96,14 +100,14 @@ def needs_supersampling(rgb: torch.Tensor, t: torch.Tensor, wrap: bool) -> torch
         return ((ca - cb).abs().amax(-1) > COLOR_STEP) | (fa != fb) | (fa & fb & jump)
 
     flag = torch.zeros_like(finite)
-    down = differ(slice(0, -1), slice(1, None), 0)                            # [H-1, W]
+    down = differ(slice(0, -1), slice(1, None), 0)  # [H-1, W]
     flag[:-1] |= down
     flag[1:] |= down
-    right = differ(slice(0, -1), slice(1, None), 1)                           # [H, W-1]
+    right = differ(slice(0, -1), slice(1, None), 1)  # [H, W-1]
     flag[:, :-1] |= right
     flag[:, 1:] |= right
     if wrap and t.shape[1] > 1:
-        seam = differ(slice(-1, None), slice(0, 1), 1)                        # last vs first column
+        seam = differ(slice(-1, None), slice(0, 1), 1)  # last vs first column
         flag[:, -1:] |= seam
         flag[:, :1] |= seam
     return flag

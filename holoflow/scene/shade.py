@@ -4,6 +4,7 @@ All colours are linear light. Lighting terms come only from what the Scene holds
 (always), the sun / moon (outdoors), point lights (``effects.lights``), shadow rays (``effects.shadows``)
 and exponential fog (``effects.fog > 0``).
 """
+
 from __future__ import annotations
 
 import math
@@ -14,8 +15,8 @@ from holoflow.scene import textures
 from holoflow.scene.intersect import Packed, cull, nearest, occluded, pack
 from holoflow.scene.model import Scene, Sky
 
-LAMP_SOFT = 0.5     # metres: point-light falloff 1 / (d^2 + LAMP_SOFT^2), no blow-up next to a lamp
-CHUNK = 1 << 13     # rays per batch on CPU: memory ~ CHUNK * primitives * 100 bytes; small enough to cull well
+LAMP_SOFT = 0.5  # metres: point-light falloff 1 / (d^2 + LAMP_SOFT^2), no blow-up next to a lamp
+CHUNK = 1 << 13  # rays per batch on CPU: memory ~ CHUNK * primitives * 100 bytes; small enough to cull well
 CHUNK_CUDA = 1 << 17
 
 
@@ -26,13 +27,13 @@ def _vec(v, device) -> torch.Tensor:
 def sky_radiance(sky: Sky, d: torch.Tensor, seed: int = 0) -> torch.Tensor:
     """Radiance [N, 3] of the sky seen along unit directions d [N, 3] (+y is down)."""
     dev = d.device
-    el = -d[:, 1]                                                              # sine of elevation
+    el = -d[:, 1]  # sine of elevation
     zen, hor = _vec(sky.zenith, dev), _vec(sky.horizon, dev)
     up = el.clamp(0.0, 1.0)
     col = hor + (zen - hor) * up.sqrt()[:, None]
     col = torch.where((el < 0)[:, None], hor * 0.8, col)
     if sky.clouds > 0:
-        plane = d[:, [0, 2]] / (up + 0.08)[:, None] * 1.2                      # clouds on a high flat layer
+        plane = d[:, [0, 2]] / (up + 0.08)[:, None] * 1.2  # clouds on a high flat layer
         p = torch.cat([plane, torch.zeros_like(plane[:, :1])], 1)
         f = textures.fbm(p, seed + 911, 5)
         cover = textures.smoothstep(1.0 - sky.clouds, 1.25 - sky.clouds, f) * textures.smoothstep(0.0, 0.08, el)
@@ -51,8 +52,9 @@ def sky_radiance(sky: Sky, d: torch.Tensor, seed: int = 0) -> torch.Tensor:
     return col
 
 
-def _albedo(scene: Scene, material: torch.Tensor, pos: torch.Tensor, uv: torch.Tensor
-            ) -> tuple[torch.Tensor, torch.Tensor]:
+def _albedo(
+    scene: Scene, material: torch.Tensor, pos: torch.Tensor, uv: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Albedo [M, 3] and emitted radiance [M, 3] of hits with material indices [M]."""
     alb = torch.zeros_like(pos)
     emit = torch.zeros_like(pos)
@@ -68,8 +70,9 @@ def _albedo(scene: Scene, material: torch.Tensor, pos: torch.Tensor, uv: torch.T
     return alb, emit
 
 
-def _shade(scene: Scene, pk: Packed, full: Packed, o: torch.Tensor, d: torch.Tensor
-           ) -> tuple[torch.Tensor, torch.Tensor]:
+def _shade(
+    scene: Scene, pk: Packed, full: Packed, o: torch.Tensor, d: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Colour [N, 3] and hit distance [N] of one batch of rays; ``pk`` holds the primitives these rays
     can hit, ``full`` all of them (for shadow rays)."""
     dev = o.device
@@ -79,12 +82,12 @@ def _shade(scene: Scene, pk: Packed, full: Packed, o: torch.Tensor, d: torch.Ten
     if len(idx):
         dh = d[idx]
         t = hit.t[idx]
-        p = o[idx] + t[:, None] * dh                                           # [M, 3] world hit points
+        p = o[idx] + t[:, None] * dh  # [M, 3] world hit points
         n = hit.normal[idx]
-        n = torch.where(((n * dh).sum(1) > 0)[:, None], -n, n)                # face the viewer
+        n = torch.where(((n * dh).sum(1) > 0)[:, None], -n, n)  # face the viewer
         mat = hit.material[idx]
         alb, emit = _albedo(scene, mat, hit.pos[idx], hit.uv[idx])
-        light = _vec(scene.ambient, dev) * (0.85 - 0.15 * n[:, 1])[:, None]     # a little brighter from above
+        light = _vec(scene.ambient, dev) * (0.85 - 0.15 * n[:, 1])[:, None]  # a little brighter from above
         key = _vec(scene.key_light, dev)
         light = light + _vec(scene.ambient, dev) * (0.8 * (n * key).sum(1).clamp_min(0.0))[:, None]
         sun_rad = _vec(scene.sun_light, dev)
@@ -102,17 +105,18 @@ def _shade(scene: Scene, pk: Packed, full: Packed, o: torch.Tensor, d: torch.Ten
                 to = _vec(lamp.position, dev) - p
                 dist2 = (to * to).sum(1)
                 ndl = (n * to).sum(1).clamp_min(0.0) / dist2.clamp_min(1e-8).sqrt()
-                light = light + _vec(lamp.intensity, dev) * (ndl / (dist2 + LAMP_SOFT ** 2))[:, None]
+                light = light + _vec(lamp.intensity, dev) * (ndl / (dist2 + LAMP_SOFT**2))[:, None]
         col = alb * light + emit
-        water = torch.tensor([scene.materials[int(m)].kind == "water" for m in range(len(scene.materials))],
-                             device=dev)[mat]
+        water = torch.tensor(
+            [scene.materials[int(m)].kind == "water" for m in range(len(scene.materials))], device=dev
+        )[mat]
         if bool(water.any()):
             col[water] = _water(scene, p[water], dh[water], col[water])
         rgb[idx] = col
     if scene.effects.fog > 0:
         fog = _vec(scene.effects.fog_color, dev)
-        trans = torch.exp(-scene.effects.fog * hit.t.clamp_max(1e6))           # 0 for sky
-        sky_w = torch.exp(-(-d[:, 1]).clamp_min(0.0) / 0.3)                     # sky fades to fog at the horizon
+        trans = torch.exp(-scene.effects.fog * hit.t.clamp_max(1e6))  # 0 for sky
+        sky_w = torch.exp(-(-d[:, 1]).clamp_min(0.0) / 0.3)  # sky fades to fog at the horizon
         trans = torch.where(torch.isfinite(hit.t), trans, 1.0 - sky_w)
         rgb = rgb * trans[:, None] + fog * (1.0 - trans)[:, None]
     return rgb, hit.t
@@ -128,7 +132,7 @@ def _water(scene: Scene, p: torch.Tensor, d: torch.Tensor, col: torch.Tensor) ->
     cos = (-(d * n).sum(1)).clamp(0.0, 1.0)
     fresnel = 0.02 + 0.98 * (1.0 - cos) ** 5
     r = d - 2.0 * (d * n).sum(1, keepdim=True) * n
-    r = torch.cat([r[:, :1], r[:, 1:2].clamp_max(-0.01), r[:, 2:]], 1)             # reflect above the horizon
+    r = torch.cat([r[:, :1], r[:, 1:2].clamp_max(-0.01), r[:, 2:]], 1)  # reflect above the horizon
     refl = sky_radiance(scene.sky, torch.nn.functional.normalize(r, dim=1), scene.seed)
     return col * (1.0 - fresnel)[:, None] + refl * fresnel[:, None]
 
@@ -152,12 +156,13 @@ def _batches(scene: Scene, origins: torch.Tensor, dirs: torch.Tensor, chunk: int
     pk = pack(scene, origins.device)
     order = coherent_order(dirs, chunk)
     for s in range(0, len(order), chunk):
-        idx = order[s:s + chunk]
+        idx = order[s : s + chunk]
         yield idx, cull(pk, origins[idx], dirs[idx]), pk
 
 
-def cast(scene: Scene, origins: torch.Tensor, dirs: torch.Tensor, chunk: int | None = None
-         ) -> tuple[torch.Tensor, torch.Tensor]:
+def cast(
+    scene: Scene, origins: torch.Tensor, dirs: torch.Tensor, chunk: int | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Trace rays through the scene: origins [N, 3] (m), unit directions [N, 3], world frame.
 
     Returns linear RGB [N, 3] float32 and hit distance t [N] along the ray in metres (+inf = sky or
@@ -174,4 +179,3 @@ def cast(scene: Scene, origins: torch.Tensor, dirs: torch.Tensor, chunk: int | N
         for idx, pk, full in _batches(scene, origins, dirs, chunk):
             rgb[idx], t[idx] = _shade(scene, pk, full, origins[idx], dirs[idx])
     return rgb, t
-

@@ -4,6 +4,7 @@ Every function is pure and deterministic (integer hashing, no global RNG). Patte
 surface points in the object's frame: ``pos`` [N, 3] (metres, solid noise) and ``uv`` [N, 2] (metres in
 the surface plane, for planks, bricks, tiles, windows). Albedos are linear light in [0, 1].
 """
+
 from __future__ import annotations
 
 import functools
@@ -32,7 +33,7 @@ def cell_hash(cells: torch.Tensor, seed: int) -> torch.Tensor:
     return hash3(c[:, 0], c[:, 1], z, seed)
 
 
-_PERIOD = 64        # lattice period of the noise table (cells)
+_PERIOD = 64  # lattice period of the noise table (cells)
 
 
 @functools.lru_cache(maxsize=1)
@@ -65,7 +66,7 @@ def value_noise(p: torch.Tensor, seed: int) -> torch.Tensor:
     q = p + torch.tensor(_shift(seed), dtype=p.dtype, device=p.device)
     f = torch.floor(q)
     w = q - f
-    q = torch.remainder(f, _PERIOD) + w * w * (3.0 - 2.0 * w)                  # [N, 3] in [0, P]
+    q = torch.remainder(f, _PERIOD) + w * w * (3.0 - 2.0 * w)  # [N, 3] in [0, P]
     grid = (q * (2.0 / _PERIOD) - 1.0).reshape(1, 1, 1, -1, 3)
     table = _noise_table().to(device=p.device, dtype=p.dtype)
     out = torch.nn.functional.grid_sample(table, grid, mode="bilinear", padding_mode="border", align_corners=True)
@@ -99,8 +100,9 @@ def smoothstep(e0: float, e1: float, x: torch.Tensor) -> torch.Tensor:
     return t * t * (3.0 - 2.0 * t)
 
 
-def albedo(kind: str, color: torch.Tensor, color2: torch.Tensor, scale: float, seed: int,
-           pos: torch.Tensor, uv: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def albedo(
+    kind: str, color: torch.Tensor, color2: torch.Tensor, scale: float, seed: int, pos: torch.Tensor, uv: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Albedo [N, 3] and emission weight [N] (0..1, multiplies the material's emission) of ``kind``."""
     fn = _PATTERNS.get(kind)
     if fn is None:
@@ -116,7 +118,7 @@ def _plain(c, c2, s, seed, pos, uv):
 
 
 def _wood(c, c2, s, seed, pos, uv):
-    u, v = uv[:, 0] / s, uv[:, 1]                                  # u across planks, v along them
+    u, v = uv[:, 0] / s, uv[:, 1]  # u across planks, v along them
     row = torch.floor(u)
     length = 6.0 * s
     off = hash3(row.long(), torch.zeros_like(row.long()), torch.zeros_like(row.long()), seed) * length
@@ -162,7 +164,7 @@ def _plaster(c, c2, s, seed, pos, uv):
 def _concrete(c, c2, s, seed, pos, uv):
     k = 0.78 + 0.3 * fbm(pos * (2.5 / s), seed, 4)
     pores = (hash3(*(torch.floor(pos * 150.0).long().unbind(1)), seed + 5) > 0.985).float()
-    size = torch.tensor([2.4 * s, 1.2 * s], device=pos.device)                     # formwork panels
+    size = torch.tensor([2.4 * s, 1.2 * s], device=pos.device)  # formwork panels
     panel = _frac(uv / size) * size
     seam = torch.minimum(panel, size - panel).min(dim=1).values
     k = k * (1.0 - 0.45 * pores) * (0.75 + 0.25 * smoothstep(0.0, 0.006, seam))
@@ -172,7 +174,7 @@ def _concrete(c, c2, s, seed, pos, uv):
 def _marble(c, c2, s, seed, pos, uv):
     warp = fbm(pos * (1.8 / s), seed, 5)
     band = torch.sin((pos[:, 0] + 0.6 * pos[:, 1] + 0.8 * pos[:, 2]) * (4.0 / s) + warp * 9.0)
-    vein = 0.35 + 0.65 * smoothstep(0.0, 0.12, band.abs())                     # thin veins
+    vein = 0.35 + 0.65 * smoothstep(0.0, 0.12, band.abs())  # thin veins
     base = c * (0.92 + 0.1 * value_noise(pos * (12.0 / s), seed + 2))[:, None]
     return _mix(c2, base, vein)
 
@@ -236,7 +238,7 @@ def _snow(c, c2, s, seed, pos, uv):
 
 def _asphalt(c, c2, s, seed, pos, uv):
     k = (0.75 + 0.45 * value_noise(pos * 70.0, seed)) * (0.85 + 0.25 * fbm(pos * 0.4, seed + 1, 3))
-    patches = smoothstep(0.55, 0.75, fbm(pos * 0.15, seed + 2, 3))                 # repaired patches
+    patches = smoothstep(0.55, 0.75, fbm(pos * 0.15, seed + 2, 3))  # repaired patches
     return _mix(c * k[:, None], c2, 0.15 * patches)
 
 
@@ -270,10 +272,11 @@ def _books(c, c2, s, seed, pos, uv):
     width = 0.03
     col = torch.floor(uv[:, 0] / width)
     h = cell_hash(torch.stack([col, slot], 1), seed)
-    hue = torch.stack([h, cell_hash(torch.stack([col, slot], 1), seed + 1),
-                       cell_hash(torch.stack([col, slot], 1), seed + 2)], 1)
+    hue = torch.stack(
+        [h, cell_hash(torch.stack([col, slot], 1), seed + 1), cell_hash(torch.stack([col, slot], 1), seed + 2)], 1
+    )
     book = 0.05 + 0.5 * hue * hue
-    top = 0.08 + 0.12 * h                                          # gap above the book
+    top = 0.08 + 0.12 * h  # gap above the book
     board = (fv > 0.92).float()
     gap = (fv < top).float() * (1.0 - board)
     out = _mix(book, c2 * 0.25, gap)
@@ -303,9 +306,29 @@ def _water(c, c2, s, seed, pos, uv):
 
 
 _PATTERNS = {
-    "plain": _plain, "wood": _wood, "brick": _brick, "tiles": _tiles, "plaster": _plaster,
-    "concrete": _concrete, "marble": _marble, "stone": _stone, "carpet": _carpet, "fabric": _fabric,
-    "leather": _leather, "metal": _metal, "grass": _grass, "sand": _sand, "rock": _rock, "snow": _snow,
-    "asphalt": _asphalt, "leaves": _leaves, "bark": _bark, "facade": _facade, "books": _books,
-    "painting": _painting, "window": _window, "glow": _glow, "water": _water,
+    "plain": _plain,
+    "wood": _wood,
+    "brick": _brick,
+    "tiles": _tiles,
+    "plaster": _plaster,
+    "concrete": _concrete,
+    "marble": _marble,
+    "stone": _stone,
+    "carpet": _carpet,
+    "fabric": _fabric,
+    "leather": _leather,
+    "metal": _metal,
+    "grass": _grass,
+    "sand": _sand,
+    "rock": _rock,
+    "snow": _snow,
+    "asphalt": _asphalt,
+    "leaves": _leaves,
+    "bark": _bark,
+    "facade": _facade,
+    "books": _books,
+    "painting": _painting,
+    "window": _window,
+    "glow": _glow,
+    "water": _water,
 }

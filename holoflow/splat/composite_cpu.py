@@ -17,6 +17,7 @@ saturated. Per-(tile, Gaussian) gradients are summed inside the tile task into t
 the slots are summed per Gaussian in a fixed order: deterministic whatever the thread count. Kernels
 are dtype-generic (float32 and float64 inputs, float64 arithmetic inside).
 """
+
 from __future__ import annotations
 
 import math
@@ -29,8 +30,8 @@ from numba import njit, prange
 
 from holoflow.splat.project import ALPHA_MAX, ALPHA_MIN, T_MIN
 
-TILE = 16          # tile side, px
-SPAN_EPS = 1e-3    # px margin of the solved row span (pixels in it are still tested exactly)
+TILE = 16  # tile side, px
+SPAN_EPS = 1e-3  # px margin of the solved row span (pixels in it are still tested exactly)
 
 
 @njit(parallel=True, cache=True)
@@ -43,10 +44,16 @@ def _boxes(visible, means2d, extent, opac, width, height, box):
     for g in prange(N):
         mx, my, ex, ey = means2d[g, 0], means2d[g, 1], extent[g, 0], extent[g, 1]
         box[g, 0], box[g, 1], box[g, 2], box[g, 3] = 0, -1, 0, -1
-        if not (visible[g] and opac[g] >= ALPHA_MIN and math.isfinite(mx) and math.isfinite(my)
-                and math.isfinite(ex) and math.isfinite(ey)):
+        if not (
+            visible[g]
+            and opac[g] >= ALPHA_MIN
+            and math.isfinite(mx)
+            and math.isfinite(my)
+            and math.isfinite(ex)
+            and math.isfinite(ey)
+        ):
             continue
-        x0 = math.ceil(min(max(mx - ex - 0.5, -1.0), width + 1.0))     # clipped: no int overflow
+        x0 = math.ceil(min(max(mx - ex - 0.5, -1.0), width + 1.0))  # clipped: no int overflow
         x1 = math.floor(min(max(mx + ex - 0.5, -1.0), width + 1.0))
         y0 = math.ceil(min(max(my - ey - 0.5, -1.0), height + 1.0))
         y1 = math.floor(min(max(my + ey - 0.5, -1.0), height + 1.0))
@@ -77,7 +84,7 @@ def _bin_tiles(order, box, means2d, conics, opac, feats, width, height, chunks):
     rec = np.empty((n, 7))
     pbox = np.empty((n, 4), np.int64)
     ft = np.empty((n, F))
-    pstart = np.zeros(n + 1, np.int64)          # entries of Gaussian p: ent[pstart[p]:pstart[p + 1]]
+    pstart = np.zeros(n + 1, np.int64)  # entries of Gaussian p: ent[pstart[p]:pstart[p + 1]]
     for p in prange(n):
         g = order[p]
         rec[p, 0], rec[p, 1] = means2d[g, 0], means2d[g, 1]
@@ -88,11 +95,13 @@ def _bin_tiles(order, box, means2d, conics, opac, feats, width, height, chunks):
             ft[p, f] = feats[g, f]
         for j in range(4):
             pbox[p, j] = box[g, j]
-        pstart[p + 1] = ((box[g, 1] // TILE - box[g, 0] // TILE + 1)         # tiles its box meets
-                         * (box[g, 3] // TILE - box[g, 2] // TILE + 1))
+        pstart[p + 1] = (
+            (box[g, 1] // TILE - box[g, 0] // TILE + 1)  # tiles its box meets
+            * (box[g, 3] // TILE - box[g, 2] // TILE + 1)
+        )
     for p in range(n):
         pstart[p + 1] += pstart[p]
-    step = (n + chunks - 1) // chunks           # run c: packed indices [c step, (c + 1) step)
+    step = (n + chunks - 1) // chunks  # run c: packed indices [c step, (c + 1) step)
     counts = np.zeros((chunks, ntiles), np.int64)
     for c in prange(chunks):
         for p in range(c * step, min(n, (c + 1) * step)):
@@ -130,7 +139,7 @@ def _row_span(rec, pbox, p, py, px0, px1):
     a, b = rec[p, 2], rec[p, 3]
     disc = b * b * dy * dy - a * (rec[p, 4] * dy * dy - 2.0 * rec[p, 6])
     lo, hi = max(px0, pbox[p, 0]), min(px1, pbox[p, 1])
-    if not a > 0.0:                  # degenerate conic: the whole box, tested pixel by pixel
+    if not a > 0.0:  # degenerate conic: the whole box, tested pixel by pixel
         return lo, hi, dy
     if disc < 0.0:
         return lo, lo - 1, dy
@@ -188,7 +197,7 @@ def _forward(rec, pbox, ft, offsets, ids, width, height, out, t_final, n_last, e
                 sy = 0.5 * cc * dy * dy
                 e_next, r = _row_exp(ca, cb, sy, lo + 0.5 - mx, dy)
                 for px in range(lo, hi + 1):
-                    ex = e_next                 # exp(-sigma) at px
+                    ex = e_next  # exp(-sigma) at px
                     e_next *= r
                     r *= q
                     i = px - ox
@@ -232,7 +241,7 @@ def _backward(rec, pbox, ft, offsets, ids, width, height, t_final, n_last, g_out
         ox, oy = _tile_origin(t, width)
         tw, th = min(TILE, width - ox), min(TILE, height - oy)
         T = np.empty((TILE, TILE))
-        stop = s                            # entries at or past every pixel's n_last: no effect
+        stop = s  # entries at or past every pixel's n_last: no effect
         for j in range(th):
             for i in range(tw):
                 T[j, i] = t_final[oy + j, ox + i]
@@ -252,7 +261,7 @@ def _backward(rec, pbox, ft, offsets, ids, width, height, t_final, n_last, g_out
                 sy = 0.5 * cc * dy * dy
                 e_next, r = _row_exp(ca, cb, sy, lo + 0.5 - mx, dy)
                 for px in range(lo, hi + 1):
-                    ex = e_next                 # exp(-sigma) at px, as the forward pass had it
+                    ex = e_next  # exp(-sigma) at px, as the forward pass had it
                     e_next *= r
                     r *= q
                     if k >= n_last[py, px]:
@@ -316,8 +325,7 @@ def _gather_grads(pstart, ent, order, eg, g_m2, g_con, g_op, g_ft):
 def serial_twin(dispatcher):
     """The same kernel compiled without parallel=True, under its own name (own cache entry)."""
     f = dispatcher.py_func
-    g = types.FunctionType(f.__code__, f.__globals__, f.__name__ + "_serial", f.__defaults__,
-                           f.__closure__)
+    g = types.FunctionType(f.__code__, f.__globals__, f.__name__ + "_serial", f.__defaults__, f.__closure__)
     g.__qualname__ = f.__qualname__ + "_serial"
     return njit(cache=True)(g)
 
@@ -327,7 +335,7 @@ _bin_tiles_serial = serial_twin(_bin_tiles)
 _forward_serial = serial_twin(_forward)
 _backward_serial = serial_twin(_backward)
 _gather_grads_serial = serial_twin(_gather_grads)
-PARALLEL_MIN_ENTRIES = 2000    # tile entries below which the serial kernels run (measured, 2 idle cores: a
+PARALLEL_MIN_ENTRIES = 2000  # tile entries below which the serial kernels run (measured, 2 idle cores: a
 #                                 128 px view of 16k entries composites in 11.4 ms parallel, 21.7 ms serial)
 PARALLEL_MIN_GAUSSIANS = 50000  # Gaussians below which the serial culling runs
 
@@ -348,12 +356,12 @@ def bin_camera(means2d, conics, opac, feats, depths, visible, extent, width, hei
     pack = (rec, pbox, ft, offsets, ids, pstart, ent) as ``_bin_tiles``."""
     N = means2d.shape[0]
     box = np.empty((N, 4), np.int64)
-    keep = (_boxes if N >= PARALLEL_MIN_GAUSSIANS else _boxes_serial)(visible, means2d, extent, opac,
-                                                                    width, height, box)
+    keep = (_boxes if N >= PARALLEL_MIN_GAUSSIANS else _boxes_serial)(
+        visible, means2d, extent, opac, width, height, box
+    )
     order = depth_order(depths, keep)
     if len(order) >= PARALLEL_MIN_GAUSSIANS:
-        return order, _bin_tiles(order, box, means2d, conics, opac, feats, width, height,
-                                 4 * numba.get_num_threads())
+        return order, _bin_tiles(order, box, means2d, conics, opac, feats, width, height, 4 * numba.get_num_threads())
     return order, _bin_tiles_serial(order, box, means2d, conics, opac, feats, width, height, 1)
 
 
@@ -363,8 +371,15 @@ def count_pairs(means2d, conics, opac, feats, depths, visible, extent, width, he
     order, pack = bin_camera(means2d, conics, opac, feats, depths, visible, extent, width, height)
     ntiles = ((width + TILE - 1) // TILE) * ((height + TILE - 1) // TILE)
     evals = np.zeros(ntiles, np.int64)
-    _forward_serial(*pack[:5], width, height, np.empty((height, width, feats.shape[1]), feats.dtype),
-                    np.empty((height, width)), np.empty((height, width), np.int64), evals)
+    _forward_serial(
+        *pack[:5],
+        width,
+        height,
+        np.empty((height, width, feats.shape[1]), feats.dtype),
+        np.empty((height, width)),
+        np.empty((height, width), np.int64),
+        evals,
+    )
     return int(evals.sum())
 
 
@@ -385,8 +400,7 @@ class _CompositeCPU(torch.autograd.Function):
         evals = np.zeros((C, ntiles), np.int64)
         packs = []
         for c in range(C):
-            order, pack = bin_camera(m2[c], np_in[1][c], np_in[2][c], np_in[3][c], dp[c], vis[c],
-                                     ex[c], width, height)
+            order, pack = bin_camera(m2[c], np_in[1][c], np_in[2][c], np_in[3][c], dp[c], vis[c], ex[c], width, height)
             fwd = _forward if pack[4].shape[0] >= PARALLEL_MIN_ENTRIES else _forward_serial
             fwd(*pack[:5], width, height, out[c], t_final[c], n_last[c], evals[c])
             packs.append((order, pack))
@@ -403,17 +417,24 @@ class _CompositeCPU(torch.autograd.Function):
         for c, (order, (rec, pbox, ft, offsets, ids, pstart, ent)) in enumerate(packs):
             eg = np.empty((ids.shape[0], 6 + F))
             par = ids.shape[0] >= PARALLEL_MIN_ENTRIES
-            (_backward if par else _backward_serial)(rec, pbox, ft, offsets, ids, width, height,
-                                                     t_final[c], n_last[c], g_out[c], eg)
-            (_gather_grads if par else _gather_grads_serial)(pstart, ent, order, eg,
-                                                             *[g[c] for g in grads])
+            (_backward if par else _backward_serial)(
+                rec, pbox, ft, offsets, ids, width, height, t_final[c], n_last[c], g_out[c], eg
+            )
+            (_gather_grads if par else _gather_grads_serial)(pstart, ent, order, eg, *[g[c] for g in grads])
         return (*[torch.from_numpy(g) for g in grads], None, None, None, None, None)
 
 
-def composite_cpu(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
-                  feats: torch.Tensor, depths: torch.Tensor, visible: torch.Tensor,
-                  extent: torch.Tensor, width: int, height: int) -> torch.Tensor:
+def composite_cpu(
+    means2d: torch.Tensor,
+    conics: torch.Tensor,
+    opacities: torch.Tensor,
+    feats: torch.Tensor,
+    depths: torch.Tensor,
+    visible: torch.Tensor,
+    extent: torch.Tensor,
+    width: int,
+    height: int,
+) -> torch.Tensor:
     """Fast compositing, same contract as ``reference.composite_dense`` plus ``extent`` [C, N, 2]
     (px half-size of each Gaussian's reach, see ``project.pixel_extent``). Returns [C, H, W, F]."""
-    return _CompositeCPU.apply(means2d, conics, opacities, feats, depths, visible, extent, width,
-                               height)
+    return _CompositeCPU.apply(means2d, conics, opacities, feats, depths, visible, extent, width, height)

@@ -12,6 +12,7 @@ pair (a [C, N] bool), the drawn ones are counted per fixed chunk of Gaussians an
 second pass computes and writes them at the offsets a prefix sum of the counts gave: the same bytes
 for any thread count.
 """
+
 from __future__ import annotations
 
 import math
@@ -35,14 +36,26 @@ def _quat_sigma(q0, q1, q2, q3, s0, s1, s2):
     else:
         n = 0.0
         w, x, y, z = 1.0, 0.0, 0.0, 0.0
-    R = (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y))
-    m = (R[0] * s0, R[1] * s1, R[2] * s2, R[3] * s0, R[4] * s1, R[5] * s2,
-         R[6] * s0, R[7] * s1, R[8] * s2)
-    S = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2], m[0] * m[3] + m[1] * m[4] + m[2] * m[5],
-         m[0] * m[6] + m[1] * m[7] + m[2] * m[8], m[3] * m[3] + m[4] * m[4] + m[5] * m[5],
-         m[3] * m[6] + m[4] * m[7] + m[5] * m[8], m[6] * m[6] + m[7] * m[7] + m[8] * m[8])
+    R = (
+        1 - 2 * (y * y + z * z),
+        2 * (x * y - w * z),
+        2 * (x * z + w * y),
+        2 * (x * y + w * z),
+        1 - 2 * (x * x + z * z),
+        2 * (y * z - w * x),
+        2 * (x * z - w * y),
+        2 * (y * z + w * x),
+        1 - 2 * (x * x + y * y),
+    )
+    m = (R[0] * s0, R[1] * s1, R[2] * s2, R[3] * s0, R[4] * s1, R[5] * s2, R[6] * s0, R[7] * s1, R[8] * s2)
+    S = (
+        m[0] * m[0] + m[1] * m[1] + m[2] * m[2],
+        m[0] * m[3] + m[1] * m[4] + m[2] * m[5],
+        m[0] * m[6] + m[1] * m[7] + m[2] * m[8],
+        m[3] * m[3] + m[4] * m[4] + m[5] * m[5],
+        m[3] * m[6] + m[4] * m[7] + m[5] * m[8],
+        m[6] * m[6] + m[7] * m[7] + m[8] * m[8],
+    )
     return (w, x, y, z, n), R, m, S
 
 
@@ -55,8 +68,7 @@ def _camera(view, Ks, c, means, n, width, height):
     z = view[c, 2, 0] * mx + view[c, 2, 1] * my + view[c, 2, 2] * mz + view[c, 2, 3]
     fx, fy, cx, cy = Ks[c, 0, 0], Ks[c, 1, 1], Ks[c, 0, 2], Ks[c, 1, 2]
     tx, ty = 0.5 * width / fx, 0.5 * height / fy
-    lim = (-(cx / fx + 0.3 * tx), (width - cx) / fx + 0.3 * tx,
-           -(cy / fy + 0.3 * ty), (height - cy) / fy + 0.3 * ty)
+    lim = (-(cx / fx + 0.3 * tx), (width - cx) / fx + 0.3 * tx, -(cy / fy + 0.3 * ty), (height - cy) / fy + 0.3 * ty)
     return x, y, z, fx, fy, cx, cy, lim
 
 
@@ -64,18 +76,27 @@ def _camera(view, Ks, c, means, n, width, height):
 def _rows(view, c, fx, fy, z, u, v):
     """r0 = fx/z (R0 - u R2), r1 = fy/z (R1 - v R2) (rows of J R)."""
     a, b = fx / z, fy / z
-    r0 = (a * (view[c, 0, 0] - u * view[c, 2, 0]), a * (view[c, 0, 1] - u * view[c, 2, 1]),
-          a * (view[c, 0, 2] - u * view[c, 2, 2]))
-    r1 = (b * (view[c, 1, 0] - v * view[c, 2, 0]), b * (view[c, 1, 1] - v * view[c, 2, 1]),
-          b * (view[c, 1, 2] - v * view[c, 2, 2]))
+    r0 = (
+        a * (view[c, 0, 0] - u * view[c, 2, 0]),
+        a * (view[c, 0, 1] - u * view[c, 2, 1]),
+        a * (view[c, 0, 2] - u * view[c, 2, 2]),
+    )
+    r1 = (
+        b * (view[c, 1, 0] - v * view[c, 2, 0]),
+        b * (view[c, 1, 1] - v * view[c, 2, 1]),
+        b * (view[c, 1, 2] - v * view[c, 2, 2]),
+    )
     return r0, r1
 
 
 @njit(cache=True)
 def _symv(S, r):
     """Sigma @ r for Sigma given by 6 scalars."""
-    return (S[0] * r[0] + S[1] * r[1] + S[2] * r[2], S[1] * r[0] + S[3] * r[1] + S[4] * r[2],
-            S[2] * r[0] + S[4] * r[1] + S[5] * r[2])
+    return (
+        S[0] * r[0] + S[1] * r[1] + S[2] * r[2],
+        S[1] * r[0] + S[3] * r[1] + S[4] * r[2],
+        S[2] * r[0] + S[4] * r[1] + S[5] * r[2],
+    )
 
 
 @njit(cache=True)
@@ -83,7 +104,7 @@ def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-CHUNK = 4096       # Gaussians per task of the two forward passes
+CHUNK = 4096  # Gaussians per task of the two forward passes
 
 
 @njit(cache=True, inline="always")
@@ -95,12 +116,12 @@ def _screen(view, Ks, c, means, n, width, height, near, far, kk, tr):
     zero = (0.0, 0.0, 0.0)
     if not (z > near and z < far):
         return False, 1.0, 0.0, 0.0, zero, zero
-    z = float(z)                                # float64 from here
+    z = float(z)  # float64 from here
     mx, my = fx * x / z + cx, fy * y / z + cy
     u = min(max(x / z, lim[0]), lim[1])
     v = min(max(y / z, lim[2]), lim[3])
     r0, r1 = _rows(view, c, fx, fy, z, u, v)
-    bx = kk * math.sqrt(_dot(r0, r0) * tr + EPS2D) * 1.0002 + 1e-3    # >= the exact reach, rounding too
+    bx = kk * math.sqrt(_dot(r0, r0) * tr + EPS2D) * 1.0002 + 1e-3  # >= the exact reach, rounding too
     by = kk * math.sqrt(_dot(r1, r1) * tr + EPS2D) * 1.0002 + 1e-3
     return _meets(mx, my, bx, by, width, height), z, mx, my, r0, r1
 
@@ -138,8 +159,9 @@ def _project_test(means, quats, scales, opac, view, Ks, width, height, near, far
             if not meets:
                 continue
             if not have_sigma:
-                _, _, _, S = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
-                                         scales[n, 0], scales[n, 1], scales[n, 2])
+                _, _, _, S = _quat_sigma(
+                    quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3], scales[n, 0], scales[n, 1], scales[n, 2]
+                )
                 have_sigma = True
             a, b, cc, ex, ey = _cov2d(S, r0, r1, kk)
             drawn[c, n] = _meets(mx, my, ex, ey, width, height)
@@ -158,8 +180,9 @@ def _count_chunks(drawn, counts):
 
 
 @njit(parallel=True, cache=True)
-def _project_write(means, quats, scales, opac, view, Ks, width, height, near, far, drawn, pos,
-                   gid, m2, con, cov, depth, ext, radii):
+def _project_write(
+    means, quats, scales, opac, view, Ks, width, height, near, far, drawn, pos, gid, m2, con, cov, depth, ext, radii
+):
     """Second pass: the drawn pairs' outputs, pair p of chunk k and camera c at pos[k, c] (then + 1):
     gid [P] Gaussian index, m2 [P, 2] px, con [P, 3] conic, cov [P, 3] cov2d, depth [P] camera z,
     ext [P, 2] px reach of alpha >= 1/255, radii [P] int32 (ceil of the larger reach)."""
@@ -175,8 +198,9 @@ def _project_write(means, quats, scales, opac, view, Ks, width, height, near, fa
                     continue
                 _, z, mx, my, r0, r1 = _screen(view, Ks, c, means, n, width, height, near, far, kk, tr)
                 if not have_sigma:
-                    _, _, _, S = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
-                                             scales[n, 0], scales[n, 1], scales[n, 2])
+                    _, _, _, S = _quat_sigma(
+                        quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3], scales[n, 0], scales[n, 1], scales[n, 2]
+                    )
                     have_sigma = True
                 a, b, cc, ex, ey = _cov2d(S, r0, r1, kk)
                 det = a * cc - b * b
@@ -197,8 +221,9 @@ def _meets(mx, my, ex, ey, width, height):
 
 
 @njit(parallel=True, cache=True)
-def _project_bwd_pairs(means, quats, scales, view, Ks, width, height, start, gid, slot, cov, g_m2, g_con,
-                       g_depth, gS, gm):
+def _project_bwd_pairs(
+    means, quats, scales, view, Ks, width, height, start, gid, slot, cov, g_m2, g_con, g_depth, gS, gm
+):
     """Each drawn pair's gradient added into its Gaussian's row ``slot[p]`` of dL/dSigma gS [U, 9] (full
     3x3) and dL/dmean gm [U, 3] (float64, zeroed by the caller; U the Gaussians some camera draws):
     camera after camera (pairs of one camera are distinct Gaussians, so its pairs run in parallel),
@@ -206,8 +231,9 @@ def _project_bwd_pairs(means, quats, scales, view, Ks, width, height, start, gid
     for c in range(view.shape[0]):
         for p in prange(start[c], start[c + 1]):
             n, row = gid[p], slot[p]
-            _, _, _, S = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
-                                     scales[n, 0], scales[n, 1], scales[n, 2])
+            _, _, _, S = _quat_sigma(
+                quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3], scales[n, 0], scales[n, 1], scales[n, 2]
+            )
             x, y, z, fx, fy, cx, cy, lim = _camera(view, Ks, c, means, n, width, height)
             ux, uy = x / z, y / z
             u = min(max(ux, lim[0]), lim[1])
@@ -226,8 +252,9 @@ def _project_bwd_pairs(means, quats, scales, view, Ks, width, height, start, gid
             gw1 = (gb * p0[0] + 2 * gc * p1[0], gb * p0[1] + 2 * gc * p1[1], gb * p0[2] + 2 * gc * p1[2])
             for i in range(3):
                 for k in range(3):
-                    gS[row, 3 * i + k] += (ga * r0[i] * r0[k] + 0.5 * gb * (r0[i] * r1[k] + r1[i] * r0[k])
-                                         + gc * r1[i] * r1[k])
+                    gS[row, 3 * i + k] += (
+                        ga * r0[i] * r0[k] + 0.5 * gb * (r0[i] * r1[k] + r1[i] * r0[k]) + gc * r1[i] * r1[k]
+                    )
             gz = g_depth[p] - (_dot(gw0, r0) + _dot(gw1, r1)) / z
             gu = -(fx / z) * (gw0[0] * view[c, 2, 0] + gw0[1] * view[c, 2, 1] + gw0[2] * view[c, 2, 2])
             gv = -(fy / z) * (gw1[0] * view[c, 2, 0] + gw1[1] * view[c, 2, 1] + gw1[2] * view[c, 2, 2])
@@ -246,8 +273,9 @@ def _project_bwd_params(quats, scales, drawn_ids, gS, gm, g_means, g_quats, g_sc
     their gradients of means, quats and scales (zeroed by the caller: the others keep 0)."""
     for u in prange(drawn_ids.shape[0]):
         n = drawn_ids[u]
-        q, Rq, m, _ = _quat_sigma(quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3],
-                                  scales[n, 0], scales[n, 1], scales[n, 2])
+        q, Rq, m, _ = _quat_sigma(
+            quats[n, 0], quats[n, 1], quats[n, 2], quats[n, 3], scales[n, 0], scales[n, 1], scales[n, 2]
+        )
         g_means[n, 0], g_means[n, 1], g_means[n, 2] = gm[u, 0], gm[u, 1], gm[u, 2]
         # Sigma = M M^T -> gM = 2 gS M; M = Rq diag(s) -> gR = gM diag(s), gs_k = sum_i gM_ik Rq_ik
         gR = np.empty(9)
@@ -262,12 +290,15 @@ def _project_bwd_params(quats, scales, drawn_ids, gS, gm, g_means, g_quats, g_sc
         if qn == 0.0:
             continue
         gw = 2 * (-qz * gR[1] + qy * gR[2] + qz * gR[3] - qx * gR[5] - qy * gR[6] + qx * gR[7])
-        gx_ = 2 * (qy * gR[1] + qz * gR[2] + qy * gR[3] - 2 * qx * gR[4] - w * gR[5]
-                   + qz * gR[6] + w * gR[7] - 2 * qx * gR[8])
-        gy_ = 2 * (-2 * qy * gR[0] + qx * gR[1] + w * gR[2] + qx * gR[3] + qz * gR[5]
-                   - w * gR[6] + qz * gR[7] - 2 * qy * gR[8])
-        gz_ = 2 * (-2 * qz * gR[0] - w * gR[1] + qx * gR[2] + w * gR[3] - 2 * qz * gR[4]
-                   + qy * gR[5] + qx * gR[6] + qy * gR[7])
+        gx_ = 2 * (
+            qy * gR[1] + qz * gR[2] + qy * gR[3] - 2 * qx * gR[4] - w * gR[5] + qz * gR[6] + w * gR[7] - 2 * qx * gR[8]
+        )
+        gy_ = 2 * (
+            -2 * qy * gR[0] + qx * gR[1] + w * gR[2] + qx * gR[3] + qz * gR[5] - w * gR[6] + qz * gR[7] - 2 * qy * gR[8]
+        )
+        gz_ = 2 * (
+            -2 * qz * gR[0] - w * gR[1] + qx * gR[2] + w * gR[3] - 2 * qz * gR[4] + qy * gR[5] + qx * gR[6] + qy * gR[7]
+        )
         dot = w * gw + qx * gx_ + qy * gy_ + qz * gz_
         g_quats[n, 0] = (gw - w * dot) / qn
         g_quats[n, 1] = (gx_ - qx * dot) / qn
@@ -280,7 +311,7 @@ _count_chunks_serial = serial_twin(_count_chunks)
 _project_write_serial = serial_twin(_project_write)
 _project_bwd_pairs_serial = serial_twin(_project_bwd_pairs)
 _project_bwd_params_serial = serial_twin(_project_bwd_params)
-PARALLEL_MIN_WORK = 20000   # Gaussians x cameras below which the serial kernels run
+PARALLEL_MIN_WORK = 20000  # Gaussians x cameras below which the serial kernels run
 
 
 class _ProjectCPU(torch.autograd.Function):
@@ -292,42 +323,72 @@ class _ProjectCPU(torch.autograd.Function):
         par = C * N >= PARALLEL_MIN_WORK
         drawn = np.zeros((C, N), np.bool_)
         counts = np.zeros(((N + CHUNK - 1) // CHUNK, C), np.int64)
-        min_opacity = float(np.asarray(ALPHA_MIN, a[3].dtype))    # 1/255 as the opacities' dtype rounds it
+        min_opacity = float(np.asarray(ALPHA_MIN, a[3].dtype))  # 1/255 as the opacities' dtype rounds it
         (_project_test if par else _project_test_serial)(*a, width, height, near, far, min_opacity, drawn)
         (_count_chunks if par else _count_chunks_serial)(drawn, counts)
         start = np.zeros(C + 1, np.int64)
         np.cumsum(counts.sum(0), out=start[1:])
-        pos = start[:-1][None] + np.cumsum(counts, 0) - counts                       # [chunks, C]
+        pos = start[:-1][None] + np.cumsum(counts, 0) - counts  # [chunks, C]
         P = int(start[-1])
         gid, depth, radii = np.empty(P, np.int64), np.empty(P, a[0].dtype), np.empty(P, np.int32)
         m2, con = np.empty((P, 2), a[0].dtype), np.empty((P, 3), a[0].dtype)
         cov, ext = np.empty((P, 3)), np.empty((P, 2))
-        (_project_write if par else _project_write_serial)(*a, width, height, near, far, drawn, pos,
-                                                            gid, m2, con, cov, depth, ext, radii)
+        (_project_write if par else _project_write_serial)(
+            *a, width, height, near, far, drawn, pos, gid, m2, con, cov, depth, ext, radii
+        )
         ctx.saved = (a, width, height, start, gid, cov)
         const = [torch.from_numpy(x) for x in (cov, ext, radii, gid, start)]
         ctx.mark_non_differentiable(*const)
-        ctx.set_materialize_grads(False)    # no zero-filled gradients for the constant outputs
+        ctx.set_materialize_grads(False)  # no zero-filled gradients for the constant outputs
         return (torch.from_numpy(m2), torch.from_numpy(con), torch.from_numpy(depth), *const)
 
     @staticmethod
     def backward(ctx, g_m2, g_con, g_depth, *_):
         (means, quats, scales, _op, view, Ks), width, height, start, gid, cov = ctx.saved
         P, N, C = gid.shape[0], means.shape[0], view.shape[0]
-        prep = lambda g, shape: (np.zeros(shape, means.dtype) if g is None  # noqa: E731
-                                 else g.detach().to(torch.from_numpy(means).dtype).contiguous().numpy())
+        prep = lambda g, shape: (
+            np.zeros(shape, means.dtype)
+            if g is None  # noqa: E731
+            else g.detach().to(torch.from_numpy(means).dtype).contiguous().numpy()
+        )
         # the Gaussians some camera draws, and each pair's row among them (one camera: the pairs)
         drawn_ids, slot = (gid, np.arange(P)) if C == 1 else np.unique(gid, return_inverse=True)
         gS, gm = np.zeros((len(drawn_ids), 9)), np.zeros((len(drawn_ids), 3))
         par = C * N >= PARALLEL_MIN_WORK
         (_project_bwd_pairs if par else _project_bwd_pairs_serial)(
-            means, quats, scales, view, Ks, width, height, start, gid, slot, cov, prep(g_m2, (P, 2)),
-            prep(g_con, (P, 3)), prep(g_depth, (P,)), gS, gm)
+            means,
+            quats,
+            scales,
+            view,
+            Ks,
+            width,
+            height,
+            start,
+            gid,
+            slot,
+            cov,
+            prep(g_m2, (P, 2)),
+            prep(g_con, (P, 3)),
+            prep(g_depth, (P,)),
+            gS,
+            gm,
+        )
         g_means, g_quats, g_scales = np.zeros_like(means), np.zeros_like(quats), np.zeros_like(scales)
-        (_project_bwd_params if par else _project_bwd_params_serial)(quats, scales, drawn_ids, gS, gm,
-                                                                     g_means, g_quats, g_scales)
-        return (torch.from_numpy(g_means), torch.from_numpy(g_quats), torch.from_numpy(g_scales),
-                None, None, None, None, None, None, None)
+        (_project_bwd_params if par else _project_bwd_params_serial)(
+            quats, scales, drawn_ids, gS, gm, g_means, g_quats, g_scales
+        )
+        return (
+            torch.from_numpy(g_means),
+            torch.from_numpy(g_quats),
+            torch.from_numpy(g_scales),
+            None,
+            None,
+            None,
+            None,
+            None,
+            None,
+            None,
+        )
 
 
 def project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, near, far) -> dict:
@@ -338,6 +399,8 @@ def project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, ne
     drawn (near < z < far, opacity >= 1/255, the 1/255 reach meets the image). Differentiable w.r.t.
     means, quats and scales through means2d, conics and depths."""
     m2, con, depth, cov, ext, radii, gid, start = _ProjectCPU.apply(
-        means, quats, scales, opacities, viewmats, Ks, width, height, float(near), float(far))
-    return dict(means2d=m2, conics=con, depths=depth, cov2d=cov, ext=ext, radii=radii, gaussian_ids=gid,
-                camera_start=start)
+        means, quats, scales, opacities, viewmats, Ks, width, height, float(near), float(far)
+    )
+    return dict(
+        means2d=m2, conics=con, depths=depth, cov2d=cov, ext=ext, radii=radii, gaussian_ids=gid, camera_start=start
+    )

@@ -7,6 +7,7 @@ statistics) and ``step_post_optimizer`` after ``opt.step()`` (densify / prune / 
 the original 3DGS ones (``TrainConfig`` documents each threshold); the optimiser's Adam moments follow
 every row that is kept, copied or removed.
 """
+
 from __future__ import annotations
 
 import math
@@ -35,8 +36,15 @@ class DefaultStrategy:
         self.state = {k: torch.zeros(n, device=device) for k in ("grad", "count", "radii")}
 
     @torch.no_grad()
-    def step_pre_optimizer(self, it: int, means2d: torch.Tensor, radii: torch.Tensor, width: int,
-                           height: int, gaussian_ids: torch.Tensor | None = None) -> None:
+    def step_pre_optimizer(
+        self,
+        it: int,
+        means2d: torch.Tensor,
+        radii: torch.Tensor,
+        width: int,
+        height: int,
+        gaussian_ids: torch.Tensor | None = None,
+    ) -> None:
         """Accumulate step ``it``'s statistics of one camera's ``width`` x ``height`` render:
         ``means2d`` [1, N, 2] (px, with ``.grad``) and ``radii`` [1, N] (px; 0 = not visible), or packed
         as the fast path's meta is: ``gaussian_ids`` [P] the Gaussian of each row of means2d [P, 2] and
@@ -46,14 +54,14 @@ class DefaultStrategy:
         st = self.state
         scale = means2d.new_tensor([width / 2, height / 2])
         if gaussian_ids is not None:
-            g = (means2d.grad * scale).norm(dim=-1)                                  # [P] NDC units
+            g = (means2d.grad * scale).norm(dim=-1)  # [P] NDC units
             st["grad"].index_add_(0, gaussian_ids, g)
             st["count"].index_add_(0, gaussian_ids, torch.ones_like(g))
             st["radii"].scatter_reduce_(0, gaussian_ids, radii.float(), "amax")
             return
-        r = radii[0].float()                                                        # [N]
-        vis = r > 0                                                                 # masks, not indices: no sync
-        g = (means2d.grad[0] * scale).norm(dim=-1)                                  # [N] NDC units
+        r = radii[0].float()  # [N]
+        vis = r > 0  # masks, not indices: no sync
+        g = (means2d.grad[0] * scale).norm(dim=-1)  # [N] NDC units
         st["grad"] += torch.where(vis, g, 0.0)
         st["count"] += vis
         st["radii"] = torch.where(vis, torch.maximum(st["radii"], r), st["radii"])
@@ -74,14 +82,14 @@ class DefaultStrategy:
     def _densify_and_prune(self, model: GaussianModel, opt: torch.optim.Adam, it: int) -> dict:
         """Clone small / split large Gaussians with a high mean view-space gradient, then prune."""
         cfg, extent, stats = self.cfg, self.extent, self.state
-        grads = torch.nan_to_num(stats["grad"] / stats["count"])                     # [N]
-        scales = torch.exp(model.log_scales.detach())                                # [N, 3]
+        grads = torch.nan_to_num(stats["grad"] / stats["count"])  # [N]
+        scales = torch.exp(model.log_scales.detach())  # [N, 3]
         big = scales.max(-1).values > cfg.percent_dense * extent
         hot = grads >= cfg.densify_grad_threshold
         clone, split = hot & ~big, hot & big
         note = None
         room = cfg.max_gaussians - len(model)
-        n_want = int(clone.sum() + split.sum())                                      # +1 each
+        n_want = int(clone.sum() + split.sum())  # +1 each
         if n_want > max(room, 0):
             cand = torch.nonzero(hot).squeeze(1)
             keep_n = max(room, 0)
@@ -89,16 +97,18 @@ class DefaultStrategy:
             chosen = torch.zeros_like(hot)
             chosen[top] = True
             clone, split = clone & chosen, split & chosen
-            note = (f"step {it}: max_gaussians={cfg.max_gaussians} reached; densified {keep_n} of "
-                    f"{n_want} candidates (highest gradients first)")
+            note = (
+                f"step {it}: max_gaussians={cfg.max_gaussians} reached; densified {keep_n} of "
+                f"{n_want} candidates (highest gradients first)"
+            )
             warnings.warn(note, stacklevel=4)
         p = {name: getattr(model, name).detach() for name in GaussianModel.PARAMS}
         extra = {k: v[clone] for k, v in p.items()}
         # Split: two samples from each Gaussian, scales / 1.6 (3DGS).
         idx = torch.nonzero(split).squeeze(1).repeat(2)
-        std = scales[idx]                                                            # [2S, 3]
+        std = scales[idx]  # [2S, 3]
         offs = torch.randn(std.shape, generator=self.generator).to(std) * std
-        rot = quat_to_rotmat(p["quats"][idx])                                        # [2S, 3, 3]
+        rot = quat_to_rotmat(p["quats"][idx])  # [2S, 3, 3]
         sp = {k: v[idx] for k, v in p.items()}
         sp["means"] = p["means"][idx] + torch.einsum("sij,sj->si", rot, offs)
         sp["log_scales"] = torch.log(std / (0.8 * 2))
@@ -114,12 +124,19 @@ class DefaultStrategy:
             reach = torch.linalg.vector_norm(model.means.detach() - self.centroid, dim=-1).clamp(min=extent)  # [N]
             prune |= torch.exp(model.log_scales.detach()).max(-1).values > 0.1 * reach
         replace_rows(model, opt, ~prune, {k: p[k][:0] for k in p})
-        return dict(step=it, cloned=int(clone.sum()), split=int(split.sum()), pruned=int(prune.sum()),
-                    count=len(model), note=note)
+        return dict(
+            step=it,
+            cloned=int(clone.sum()),
+            split=int(split.sum()),
+            pruned=int(prune.sum()),
+            count=len(model),
+            note=note,
+        )
 
 
-def replace_rows(model: GaussianModel, opt: torch.optim.Adam, keep: torch.Tensor,
-                 extra: dict[str, torch.Tensor]) -> None:
+def replace_rows(
+    model: GaussianModel, opt: torch.optim.Adam, keep: torch.Tensor, extra: dict[str, torch.Tensor]
+) -> None:
     """Keep rows ``keep`` [N] bool of every parameter and append ``extra`` rows; Adam moments follow
     (zeros for the new rows)."""
     for group in opt.param_groups:

@@ -1,4 +1,5 @@
 """Seeded synthetic Gaussian scenes and cameras for tests and benchmarks (OpenCV axes)."""
+
 from __future__ import annotations
 
 import math
@@ -17,12 +18,12 @@ def look_at(eye, target) -> torch.Tensor:
     """World-to-camera viewmat [4, 4] (float32) from sequences (``geometry.camera.look_at``)."""
     from holoflow.geometry.camera import look_at as _look_at
 
-    return _look_at(torch.as_tensor(eye, dtype=torch.float64),
-                    torch.as_tensor(target, dtype=torch.float64)).float()
+    return _look_at(torch.as_tensor(eye, dtype=torch.float64), torch.as_tensor(target, dtype=torch.float64)).float()
 
 
-def surface_scene(n: int, seed: int = 0, depth: float = 4.0, fov_x_deg: float = 60.0,
-                  aspect: float = 1.0) -> dict[str, torch.Tensor]:
+def surface_scene(
+    n: int, seed: int = 0, depth: float = 4.0, fov_x_deg: float = 60.0, aspect: float = 1.0
+) -> dict[str, torch.Tensor]:
     """n activated Gaussians on a wavy surface filling the view of a camera at the origin looking
     along +z (surface at about ``depth`` metres), like a 3DGS scene after init: scales from the point
     spacing, random anisotropy and rotation, opacity in [0.2, 0.9], random colours.
@@ -35,9 +36,13 @@ def surface_scene(n: int, seed: int = 0, depth: float = 4.0, fov_x_deg: float = 
     z = depth + 0.4 * torch.sin(1.7 * u) * torch.cos(2.3 * v) + 0.05 * torch.randn(n, generator=g)
     spacing = math.sqrt(4 * half_x * half_y / max(n, 1))
     scales = spacing * (0.5 + torch.rand(n, 3, generator=g))
-    return dict(means=torch.stack([u, v, z], 1), quats=torch.randn(n, 4, generator=g),
-                scales=scales, opacities=0.2 + 0.7 * torch.rand(n, generator=g),
-                colors=torch.rand(n, 3, generator=g))
+    return dict(
+        means=torch.stack([u, v, z], 1),
+        quats=torch.randn(n, 4, generator=g),
+        scales=scales,
+        opacities=0.2 + 0.7 * torch.rand(n, generator=g),
+        colors=torch.rand(n, 3, generator=g),
+    )
 
 
 def room_scene(n: int, seed: int = 0, half: float = 2.0) -> dict[str, torch.Tensor]:
@@ -55,6 +60,10 @@ def room_scene(n: int, seed: int = 0, half: float = 2.0) -> dict[str, torch.Tens
     means[torch.arange(n), other[:, 0]] = uv[:, 0]
     means[torch.arange(n), other[:, 1]] = uv[:, 1]
     spacing = math.sqrt(6 * (2 * half) ** 2 / max(n, 1))
-    return dict(means=means, quats=torch.randn(n, 4, generator=g),
-                scales=spacing * (0.5 + torch.rand(n, 3, generator=g)),
-                opacities=0.2 + 0.7 * torch.rand(n, generator=g), colors=torch.rand(n, 3, generator=g))
+    return dict(
+        means=means,
+        quats=torch.randn(n, 4, generator=g),
+        scales=spacing * (0.5 + torch.rand(n, 3, generator=g)),
+        opacities=0.2 + 0.7 * torch.rand(n, generator=g),
+        colors=torch.rand(n, 3, generator=g),
+    )

@@ -1,5 +1,6 @@
 """holoflow bench accuracy: the sweep's points resolve against pipeline.yaml, its fits and Pareto front
 are right on known data, and a two-point tiny sweep reuses upstream stages through one store."""
+
 import csv
 import math
 
@@ -10,7 +11,7 @@ from holoflow.bench import accuracy as acc
 
 @pytest.mark.parametrize("point", acc.full_points() + acc.quick_points(), ids=lambda p: p.name)
 def test_every_point_resolves_against_pipeline_yaml(point):
-    params = acc.resolved_params(point.profile, list(point.sets))      # raises on an unknown param
+    params = acc.resolved_params(point.profile, list(point.sets))  # raises on an unknown param
     for item in point.sets:
         stage, rest = item.split(".", 1)
         assert rest.split("=", 1)[0] in params[stage]
@@ -34,19 +35,28 @@ def test_pareto_front_keeps_only_undominated_points():
 
 def test_quick_sweep_reuses_upstream_and_resumes(tmp_path):
     store, out = tmp_path / "store", tmp_path / "out.csv"
-    argv = ["--quick", "--points", "base,iters-x0.5", "--store", str(store), "--csv", str(out),
-            "--plot", str(tmp_path / "p.png")]
+    argv = [
+        "--quick",
+        "--points",
+        "base,iters-x0.5",
+        "--store",
+        str(store),
+        "--csv",
+        str(out),
+        "--plot",
+        str(tmp_path / "p.png"),
+    ]
     assert acc.main(argv) == 0
     rows = list(csv.DictReader(open(out)))
     assert [r["point"] for r in rows] == ["base", "iters-x0.5"]
-    assert set(rows[1]["ran"].split()) == {"pre_opt", "inp_set", "transfer_opt", "export"}   # upstream from the store
-    for name in ("base_pano", "tangent_depth", "pano_set"):                       # same records, same costs
+    assert set(rows[1]["ran"].split()) == {"pre_opt", "inp_set", "transfer_opt", "export"}  # upstream from the store
+    for name in ("base_pano", "tangent_depth", "pano_set"):  # same records, same costs
         assert rows[0][f"{name}_s"] == rows[1][f"{name}_s"] and float(rows[0][f"{name}_s"]) > 0
     for r in rows:
         assert 0 < float(r["abs_rel"]) < 1 and math.isfinite(float(r["g1_novel_psnr"]))
         assert float(r["total_cpu_s"]) > 0 and int(r["g1_gaussians"]) > 0
     assert (tmp_path / "p.png").stat().st_size > 10_000
-    assert acc.main(argv) == 0                                                     # resume: nothing reruns
+    assert acc.main(argv) == 0  # resume: nothing reruns
     again = list(csv.DictReader(open(out)))
     assert [r["ran"] for r in again] == ["", ""]
     assert [r["g1_novel_psnr"] for r in again] == [r["g1_novel_psnr"] for r in rows]
@@ -95,8 +105,24 @@ def test_profiles_measure_a_photo_at_the_viewing_size(tmp_path):
     doc = tmp_path / "docs" / "acc.md"
     doc.parent.mkdir()
     doc.write_text("# kept\n")
-    argv = ["--profiles", "tiny,nosuch", "--scenes", "", "--photos", str(photos), "--size", "192", "--nr-cameras",
-            "2", "--store", str(tmp_path / "store"), "--doc", str(doc), "--json", str(tmp_path / "p.json")]
+    argv = [
+        "--profiles",
+        "tiny,nosuch",
+        "--scenes",
+        "",
+        "--photos",
+        str(photos),
+        "--size",
+        "192",
+        "--nr-cameras",
+        "2",
+        "--store",
+        str(tmp_path / "store"),
+        "--doc",
+        str(doc),
+        "--json",
+        str(tmp_path / "p.json"),
+    ]
     assert acc.main(argv) == 0
     r = json.loads((tmp_path / "p.json").read_text())
     assert r["skipped"][0].startswith("nosuch: profile 'nosuch' is not defined")

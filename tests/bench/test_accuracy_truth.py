@@ -1,5 +1,6 @@
 """`holoflow bench accuracy --profiles P --truth DIR`: a truth set is run the ways asked, each scored per ring
 beside its seconds; an absent truth set is skipped with a note."""
+
 import json
 import math
 
@@ -24,12 +25,38 @@ def test_a_truth_set_is_run_and_scored_per_ring(tmp_path):
     from holoflow.evaluation.truth_set import write_truth_set
     from holoflow.scene import scene_from_prompt
 
-    truth = write_truth_set(tmp_path / "room", scene_from_prompt("a small wooden cabin", 0), size=48,
-                            rings=(0.0, 0.5), per_ring=2, pano_width=128, samples=1)
+    truth = write_truth_set(
+        tmp_path / "room",
+        scene_from_prompt("a small wooden cabin", 0),
+        size=48,
+        rings=(0.0, 0.5),
+        per_ring=2,
+        pano_width=128,
+        samples=1,
+    )
     doc = tmp_path / "acc.md"
-    argv = ["--profiles", "tiny", "--scenes", "", "--photos", "", "--truth", str(truth), "--truth-ways", "exact",
-            "--size", "48", "--nr-cameras", "0", "--store", str(tmp_path / "store"), "--doc", str(doc),
-            "--json", str(tmp_path / "p.json")]
+    argv = [
+        "--profiles",
+        "tiny",
+        "--scenes",
+        "",
+        "--photos",
+        "",
+        "--truth",
+        str(truth),
+        "--truth-ways",
+        "exact",
+        "--size",
+        "48",
+        "--nr-cameras",
+        "0",
+        "--store",
+        str(tmp_path / "store"),
+        "--doc",
+        str(doc),
+        "--json",
+        str(tmp_path / "p.json"),
+    ]
     assert acc.main(argv) == 0
     (run,) = json.loads((tmp_path / "p.json").read_text())["runs"]
     row = run["row"]

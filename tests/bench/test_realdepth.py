@@ -1,4 +1,5 @@
 """`holoflow bench realdepth` helpers on a synthetic box room (no shared data needed)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -15,8 +16,11 @@ def _box_room(H=128, W=256, half=(1.5, 3.0), h=1.6, c=1.2):
     sx, cz = np.abs(np.sin(lon)), np.abs(np.cos(lon))
     d = np.minimum(half[0] / np.maximum(sx, 1e-9), half[1] / np.maximum(cz, 1e-9))  # [1, W] wall distance
     lat_f, lat_c = -np.arctan(h / d), np.arctan(c / d)
-    depth = np.where(lat < lat_f, h / np.maximum(-np.sin(lat), 1e-9),
-                     np.where(lat > lat_c, c / np.maximum(np.sin(lat), 1e-9), d / np.cos(lat)))
+    depth = np.where(
+        lat < lat_f,
+        h / np.maximum(-np.sin(lat), 1e-9),
+        np.where(lat > lat_c, c / np.maximum(np.sin(lat), 1e-9), d / np.cos(lat)),
+    )
     img = np.zeros((H, W, 3), np.float32)
     img[:] = (0.45, 0.35, 0.22)  # walls
     img[np.broadcast_to(lat < lat_f, (H, W))] = (0.08, 0.08, 0.09)  # floor
@@ -24,7 +28,7 @@ def _box_room(H=128, W=256, half=(1.5, 3.0), h=1.6, c=1.2):
     corner = np.abs(np.abs(np.tan(lon)) - half[0] / half[1]).argsort(axis=1)[0, :4]  # the 4 corner columns
     for col in corner:
         band = (lat[:, 0] >= lat_f[0, col]) & (lat[:, 0] <= lat_c[0, col])
-        img[band, max(col - 1, 0):col + 2] = 0.05
+        img[band, max(col - 1, 0) : col + 2] = 0.05
     img *= np.exp(np.random.default_rng(0).normal(0, 0.03, img.shape)).astype(np.float32)
     return img, depth
 
@@ -33,11 +37,12 @@ def test_turned_estimates_are_turned_back_before_scoring():
     pano, truth = _box_room()
     direct = score(estimate_layout_depth(pano).depth.astype(np.float64), truth, "metric")["abs_rel"]
     turned = turned_abs_rel(pano, truth, "metric", 4)
-    assert turned[0] == direct                       # no turn: the engine's own score
-    assert max(turned) < 0.02                        # measured 0.007-0.009: each turned back exactly
+    assert turned[0] == direct  # no turn: the engine's own score
+    assert max(turned) < 0.02  # measured 0.007-0.009: each turned back exactly
     # the room is not turn-invariant: an estimate left turned by one step (11.25 deg) scores 0.037
-    one_step = score(np.roll(estimate_layout_depth(pano).depth.astype(np.float64), 8, axis=1), truth,
-                     "metric")["abs_rel"]
+    one_step = score(np.roll(estimate_layout_depth(pano).depth.astype(np.float64), 8, axis=1), truth, "metric")[
+        "abs_rel"
+    ]
     assert one_step > 0.03
 
 

@@ -1,4 +1,5 @@
 """--use, inspect (EXR/PLY), gc and pin, dag, eval/report/bench dispatch."""
+
 import json
 
 import numpy as np
@@ -19,7 +20,7 @@ def test_use_exr_replaces_stage_output(project, capsys, monkeypatch):
     write_rgb(mine, np.full((2, 3, 3), 0.5, np.float32), Z=np.ones((2, 3), np.float32))
     s = _images(project, capsys, "--pipeline", "images.yaml", "--use", f"img={mine}")
     assert project.how(s) == {"img": "used", "cloud": "ran"}
-    pano = project.store / "latest" / "img" / "pano.exr"          # primary name, not mine.exr
+    pano = project.store / "latest" / "img" / "pano.exr"  # primary name, not mine.exr
     assert pano.read_bytes() == mine.read_bytes()
     rc, out, _ = project.cli("inspect", "cloud", "--pipeline", "images.yaml", "--json", capsys=capsys)
     ply = json.loads(out)["files"]["points.ply"]
@@ -57,7 +58,7 @@ def test_use_photo_decoded_once_per_store(project, capsys, monkeypatch):
     assert out.open(str(photo), oiio.ImageSpec(16, 8, 3, "uint8"))
     out.write_image(codes)
     out.close()
-    use = ("--pipeline", "images.yaml", "--use", f"img={photo}", "--until", "img")   # the toy cloud wants Z
+    use = ("--pipeline", "images.yaml", "--use", f"img={photo}", "--until", "img")  # the toy cloud wants Z
     first = _images(project, capsys, *use)
     pano = (project.store / "latest" / "img" / "pano.exr").resolve()
 
@@ -71,7 +72,7 @@ def test_use_photo_decoded_once_per_store(project, capsys, monkeypatch):
     runs = [json.loads((project.store / "runs" / s["run"] / "run.json").read_text()) for s in (first, again)]
     assert runs[1]["stages"]["img"]["import"] == runs[0]["stages"]["img"]["import"]
     assert runs[1]["stages"]["img"]["import"]["file"] == "room.png"
-    pano.unlink()                                                  # the object left the store
+    pano.unlink()  # the object left the store
     with pytest.raises(AssertionError, match="decoded a second time"):
         project.cli("run", *use, capsys=capsys)
 
@@ -137,7 +138,7 @@ def test_gc_dry_run_then_yes_keeps_latest_and_pinned(project, capsys):
     assert not (project.store / "runs" / second).exists() and (project.store / "runs" / first).exists()
     rc, out, _ = project.cli("verify", capsys=capsys)
     assert rc == 0
-    s = project.run_json(capsys=capsys)                      # the pinned default config is still cached
+    s = project.run_json(capsys=capsys)  # the pinned default config is still cached
     assert set(project.how(s).values()) == {"cached"}
     s = project.run_json("--set", "upper.mode=title", capsys=capsys)
     assert project.how(s)["upper"] == "ran"

@@ -1,5 +1,6 @@
 """`holoflow view` without a browser: what it opens, the splat arrays it hands viser, and the one-line
 errors (not a scene, port in use). The browser test is tests/e2e/test_view_browser.py."""
+
 import socket
 from contextlib import contextmanager
 from types import SimpleNamespace
@@ -29,8 +30,8 @@ def test_covariance_colour_and_opacity(tmp_path):
     assert s["centers"].shape == (50, 3) and s["opacities"].shape == (50, 1)
     expected = [[0.025, -0.015, 0], [-0.015, 0.025, 0], [0, 0, 0.09]]
     np.testing.assert_allclose(s["covariances"][0], expected, atol=1e-6)
-    np.testing.assert_allclose(s["rgbs"], 0.5)                 # f_dc = 0: mid grey
-    np.testing.assert_allclose(s["opacities"], 0.5)            # logit 0
+    np.testing.assert_allclose(s["rgbs"], 0.5)  # f_dc = 0: mid grey
+    np.testing.assert_allclose(s["opacities"], 0.5)  # logit 0
 
 
 def test_subsampled_above_the_cap_with_a_message(tmp_path, capsys):
@@ -80,6 +81,7 @@ def test_port_in_use_is_one_line(tmp_path, capsys):
 def test_look_around_turns_once_level_from_the_centre():
     class Client:
         """Records the camera after each atomic update, as viser's client handle would send it."""
+
         def __init__(self):
             self.camera, self.frames = SimpleNamespace(), []
 
@@ -93,5 +95,6 @@ def test_look_around_turns_once_level_from_the_centre():
     assert len(client.frames) == 9
     assert all(pos == (0, 0, 0) and up == (0, -1, 0) and at[1] == 0 for pos, at, up in client.frames)
     looks = np.array([at for _, at, _ in client.frames])
-    np.testing.assert_allclose(looks[[0, 2, 4, 6, 8]], [[0, 0, 1], [1, 0, 0], [0, 0, -1], [-1, 0, 0], [0, 0, 1]],
-                               atol=1e-12)                          # forward, right (+x), back, left, forward
+    np.testing.assert_allclose(
+        looks[[0, 2, 4, 6, 8]], [[0, 0, 1], [1, 0, 0], [0, 0, -1], [-1, 0, 0], [0, 0, 1]], atol=1e-12
+    )  # forward, right (+x), back, left, forward

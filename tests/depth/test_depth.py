@@ -1,5 +1,6 @@
 """Panorama depth: metrics, robust fits, face alignment, engines (incl. the simulation's calibration),
 hard cases and the two stage programs. Small faces (16-48 px) keep the whole file well under a minute."""
+
 import json
 import subprocess
 import sys
@@ -25,7 +26,7 @@ def _scene_radial(dirs):
     for c, rad in (((1.0, 0.5, 2.0), 0.6), ((-1.5, 0.8, -1.0), 0.5)):
         c = np.array(c)
         b = dirs @ c
-        disc = b ** 2 - (c @ c - rad ** 2)
+        disc = b**2 - (c @ c - rad**2)
         t = np.where(disc > 0, b - np.sqrt(np.maximum(disc, 0)), np.inf)
         r = np.where((t > 0) & (t < r), t, r)
     return r
@@ -53,6 +54,7 @@ def room_pano():
 
 
 # --- metrics and fits -------------------------------------------------------------------------------
+
 
 def test_depth_metrics_values_sky_and_misses():
     t = np.array([1.0, 2.0, 4.0, np.inf])
@@ -91,27 +93,28 @@ def test_sky_edge_mixtures_become_sky_and_nothing_else_moves():
     wrap) stay bit for bit."""
     H, W = 32, 64
     disp = np.zeros((H, W))
-    disp[10:] = 1 / 20.0                                   # building (rows 10..), sky above
+    disp[10:] = 1 / 20.0  # building (rows 10..), sky above
     disp[20:] = 1 / np.linspace(200.0, 2.0, H - 20)[:, None]  # ground from far (row 20) to near
-    disp[12:, 30:34] = 1 / 8.0                             # a nearer pole below the building's top
-    disp[10] *= 0.3                                        # a 2-pixel mixture: 30 % and 70 % building
+    disp[12:, 30:34] = 1 / 8.0  # a nearer pole below the building's top
+    disp[10] *= 0.3  # a 2-pixel mixture: 30 % and 70 % building
     disp[11] *= 0.7
     depth = disparity_to_depth(disp, 1.0, 0.0, max_depth=3000.0)
     out = sky_mixed_edges(depth)
-    assert np.isposinf(out[10]).all()                      # mostly sky -> sky
+    assert np.isposinf(out[10]).all()  # mostly sky -> sky
     beside_pole = np.zeros(W, bool)
     beside_pole[28:36] = True
     assert np.isposinf(out[11, beside_pole]).all()
     # bit-equal on any CPU: the output is the input or +inf (a select), chosen by 1/x and min / max filters
     # (correctly rounded or exact in any order and SIMD width)
     assert np.array_equal(out[11, ~beside_pole], depth[11, ~beside_pole])  # mostly building: kept
-    assert np.array_equal(out[12:], depth[12:])            # away from the sky: untouched
+    assert np.array_equal(out[12:], depth[12:])  # away from the sky: untouched
     assert np.array_equal(sky_mixed_edges(np.roll(depth, 32, axis=1)), np.roll(out, 32, axis=1))
     no_sky = np.where(np.isfinite(depth), depth, 500.0)
     assert np.array_equal(sky_mixed_edges(no_sky), no_sky)  # nothing to do without sky
 
 
 # --- alignment --------------------------------------------------------------------------------------
+
 
 def test_alignment_recovers_per_face_affine(faces32):
     """Exact disparities under an unknown affine map per face: affine and grid restore one consistent
@@ -147,6 +150,7 @@ def test_grid_beats_affine_beats_median_on_simulated_faces(faces32):
 
 
 # --- the simulated engine's calibration -------------------------------------------------------------
+
 
 def _best_affine_abs_rel(raw, z):
     """AbsRel (in disparity) of each face's raw disparity after its best scale + shift vs 1 / z."""
@@ -190,6 +194,7 @@ def test_simulated_relative_is_calibrated_like_a_network():
 
 # --- hard cases -------------------------------------------------------------------------------------
 
+
 def test_bad_engine_values_and_empty_face_stay_finite(faces32):
     K, V, dirs, cos, ov = faces32
     raw = simulated_relative(_scene_radial(dirs), cos, seed=4).astype(np.float64)
@@ -224,10 +229,15 @@ def test_constant_and_all_sky(room_pano):
         pd.metric_from_disparity(res.disparity, rgb, sky, "simulated", MetricAlignParams(faces=3, face_size=16))
     with pytest.raises(ValueError, match="constant"):
         pd.metric_from_disparity(np.ones_like(r), rgb, r, "simulated", MetricAlignParams(faces=3, face_size=16))
-    const = align_faces(np.ones((20, 8, 8)), np.ones((20, 8, 8), bool), np.ones((20, 8, 8)),
-                        find_overlaps(*[pd._np(x) for x in (pd.icosahedron_faces(8, 0.3).K,
-                                                            pd.icosahedron_faces(8, 0.3).viewmat)], 8, 8),
-                        TangentDepthParams())
+    const = align_faces(
+        np.ones((20, 8, 8)),
+        np.ones((20, 8, 8), bool),
+        np.ones((20, 8, 8)),
+        find_overlaps(
+            *[pd._np(x) for x in (pd.icosahedron_faces(8, 0.3).K, pd.icosahedron_faces(8, 0.3).viewmat)], 8, 8
+        ),
+        TangentDepthParams(),
+    )
     assert np.isfinite(const.radial).all()
 
 
@@ -261,15 +271,29 @@ def test_pipeline_accuracy_on_analytic_room(room_pano):
 
 # --- the stage programs -----------------------------------------------------------------------------
 
+
 def _run_stage(tmp_path, stage, engine, params, inputs):
     out = tmp_path / f"{stage}_{engine}_out"
     out.mkdir()
-    job = {"stage": stage, "engine": engine, "params": params, "seed": 0, "prompt": "",
-           "inputs": {k: str(v) for k, v in inputs.items()}, "output_dir": str(out),
-           "work_dir": str(tmp_path / "work"), "device": "cpu"}
+    job = {
+        "stage": stage,
+        "engine": engine,
+        "params": params,
+        "seed": 0,
+        "prompt": "",
+        "inputs": {k: str(v) for k, v in inputs.items()},
+        "output_dir": str(out),
+        "work_dir": str(tmp_path / "work"),
+        "device": "cpu",
+    }
     (tmp_path / f"{stage}.json").write_text(json.dumps(job))
-    proc = subprocess.run([sys.executable, str(ROOT / "stages" / f"{stage}.py"), str(tmp_path / f"{stage}.json")],
-                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "stages" / f"{stage}.py"), str(tmp_path / f"{stage}.json")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     return proc, out
 
 
@@ -280,9 +304,23 @@ def test_stages_write_contract_and_metrics(tmp_path, room_pano):
     src = tmp_path / "base"
     src.mkdir()
     write_rgb(src / "pano.exr", rgb, {"holoflow.depth_kind": "radial"}, Z=r.astype(np.float32))
-    proc, td = _run_stage(tmp_path, "tangent_depth", "simulated",
-                          {"width": 64, "face_size": 16, "padding": 0.3, "grid": [3, 3], "smoothness": 1.0,
-                           "scale_reg": 0.01, "blend_ramp": 0.5, "align": "grid", "model": ""}, {"pano": src, "truth": src})
+    proc, td = _run_stage(
+        tmp_path,
+        "tangent_depth",
+        "simulated",
+        {
+            "width": 64,
+            "face_size": 16,
+            "padding": 0.3,
+            "grid": [3, 3],
+            "smoothness": 1.0,
+            "scale_reg": 0.01,
+            "blend_ramp": 0.5,
+            "align": "grid",
+            "model": "",
+        },
+        {"pano": src, "truth": src},
+    )
     assert proc.returncode == 0, proc.stderr
     ch, attrs = read_exr(td / "disparity.exr")
     assert attrs["holoflow.depth_kind"] == "disparity" and attrs["holoflow.simulation"] == 1
@@ -292,8 +330,13 @@ def test_stages_write_contract_and_metrics(tmp_path, room_pano):
     assert "truth_oracle_affine" in proc.stdout
     prog = [json.loads(l[10:]) for l in proc.stdout.splitlines() if l.startswith("@progress ")]
     assert prog and prog[-1] == {"done": 20, "total": 20, "what": "faces"}
-    proc, ma = _run_stage(tmp_path, "metric_align", "simulated", {"faces": 4, "face_size": 16, "model": ""},
-                          {"disparity": td, "pano": src, "truth": src})
+    proc, ma = _run_stage(
+        tmp_path,
+        "metric_align",
+        "simulated",
+        {"faces": 4, "face_size": 16, "model": ""},
+        {"disparity": td, "pano": src, "truth": src},
+    )
     assert proc.returncode == 0, proc.stderr
     ch, attrs = read_exr(ma / "depth.exr")
     assert attrs["holoflow.depth_kind"] == "radial" and (ch["Z"] > 0).all()
@@ -335,16 +378,19 @@ def test_real_engines_get_linear_faces_and_progress_takes_what(monkeypatch, room
             progress(len(images), len(images), "images")
             which = [int(np.argmin(np.abs(linear - im).sum((1, 2, 3)))) for im in np.asarray(images)]
             return make(z[which])
+
         return engine
 
     monkeypatch.setattr(depth_anything, "relative_disparity", fake("da", lambda zf: 2.0 / zf + 0.3))
     monkeypatch.setattr(zoedepth, "metric_depth", fake("zd", lambda zf: zf))
     calls = []
     progress = lambda done, total, what: calls.append((done, total, what))  # noqa: E731
-    res = pd.estimate_disparity(rgb, None, "depth_anything", TangentDepthParams(face_size=16, padding=0.3, grid=(2, 2)),
-                                progress=progress)
-    md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth", MetricAlignParams(faces=3, face_size=16),
-                                  progress=progress)
+    res = pd.estimate_disparity(
+        rgb, None, "depth_anything", TangentDepthParams(face_size=16, padding=0.3, grid=(2, 2)), progress=progress
+    )
+    md = pd.metric_from_disparity(
+        res.disparity, rgb, None, "zoedepth", MetricAlignParams(faces=3, face_size=16), progress=progress
+    )
     assert np.allclose(seen["da"], linear, atol=1e-6)
     assert np.allclose(seen["zd"], linear[md.faces], atol=1e-6)
     assert not np.allclose(seen["da"], linear_to_srgb(linear, clip=True), atol=0.05)  # an encode would show
@@ -363,11 +409,14 @@ def test_real_engines_dispatch_with_tiny_random_models(tmp_path, room_pano):
     rgb, r = room_pano
     da = save_depth_anything(tmp_path / "da")
     zd = save_zoedepth(tmp_path / "zd")
-    res = pd.estimate_disparity(rgb, None, "depth_anything", TangentDepthParams(face_size=16, grid=(2, 2), model=str(da)))
+    res = pd.estimate_disparity(
+        rgb, None, "depth_anything", TangentDepthParams(face_size=16, grid=(2, 2), model=str(da))
+    )
     assert res.engine["engine"] == "depth_anything" and np.isfinite(res.disparity).all()
     # the seeded random models (seed 0) give a disparity that grows with zoedepth's: a fit scale near 160
-    md = pd.metric_from_disparity(res.disparity, rgb, None, "zoedepth",
-                                  MetricAlignParams(faces=2, face_size=16, model=str(zd)))
+    md = pd.metric_from_disparity(
+        res.disparity, rgb, None, "zoedepth", MetricAlignParams(faces=2, face_size=16, model=str(zd))
+    )
     assert md.engine["engine"] == "zoedepth" and len(md.faces) == 2
     assert md.fit["scale"] > 0 and md.depth.shape == res.disparity.shape
     assert np.isfinite(md.depth).all() and (md.depth > 0).all()

@@ -1,4 +1,5 @@
 """The image-driven layout engine and image import: hard cases stay finite or fail with one line."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -27,13 +28,13 @@ def _room(H=128, W=256, wall=3.0, h=1.6, ceiling=1.2, lines=4):
     L = lat[:, None] * np.ones((1, W))
     lat_f, lat_c = -np.arctan(h / wall), np.arctan(ceiling / wall)
     img = np.zeros((H, W, 3), np.float32)
-    img[:] = (0.45, 0.35, 0.22)                          # walls
-    img[L < lat_f] = (0.08, 0.08, 0.09)                   # floor
-    img[L > lat_c] = (0.8, 0.8, 0.8)                      # ceiling
+    img[:] = (0.45, 0.35, 0.22)  # walls
+    img[L < lat_f] = (0.08, 0.08, 0.09)  # floor
+    img[L > lat_c] = (0.8, 0.8, 0.8)  # ceiling
     for c0 in np.linspace(0, W, lines + 1)[:-1].astype(int):  # vertical corner / door-frame edges
         band = (L >= lat_f) & (L <= lat_c)
         band[:, :c0] = False
-        band[:, c0 + 3:] = False
+        band[:, c0 + 3 :] = False
         img[band] = 0.05
     rng = np.random.default_rng(0)
     img *= np.exp(rng.normal(0, 0.03, img.shape)).astype(np.float32)
@@ -67,7 +68,7 @@ def test_layout_recovers_a_synthetic_room():
     d = est.depth
     assert d.shape == img.shape[:2] and np.isfinite(d).all() and (d > 0).all()
     H = d.shape[0]
-    horizon = d[H // 2 - 2:H // 2 + 2]  # walls at the horizon: 3 m
+    horizon = d[H // 2 - 2 : H // 2 + 2]  # walls at the horizon: 3 m
     assert abs(np.median(horizon) - 3.0) < 0.6
     floor_row = int(H * 0.9)  # the floor plane from the camera height
     lat = np.pi / 2 - np.pi * (floor_row + 0.5) / H
@@ -97,8 +98,11 @@ def test_turning_the_camera_turns_the_depth():
 @pytest.mark.parametrize("kind", ["black", "constant", "hdr"])
 def test_layout_is_finite_on_degenerate_images(kind):
     H, W = 64, 128
-    img = {"black": np.zeros((H, W, 3), np.float32), "constant": np.full((H, W, 3), 0.5, np.float32),
-           "hdr": _room(H, W) * 40.0}[kind]
+    img = {
+        "black": np.zeros((H, W, 3), np.float32),
+        "constant": np.full((H, W, 3), 0.5, np.float32),
+        "hdr": _room(H, W) * 40.0,
+    }[kind]
     est = estimate_layout_depth(img)
     assert est.depth.shape == (H, W)
     assert not np.isnan(est.depth).any()
@@ -124,11 +128,11 @@ def test_deep_blue_sky_over_bright_ground_is_outdoors():
     as sky whatever its lightness; a white ceiling over a bright floor stays indoors."""
     H, W = 64, 128
     img = np.zeros((H, W, 3), np.float32)
-    img[: H // 2] = (0.05, 0.12, 0.45)   # deep blue sky, darker than the ground
-    img[H // 2:] = (0.20, 0.45, 0.08)    # sunlit grass
+    img[: H // 2] = (0.05, 0.12, 0.45)  # deep blue sky, darker than the ground
+    img[H // 2 :] = (0.20, 0.45, 0.08)  # sunlit grass
     assert classify_scene(_lab_of(img), _lat(H))[0] == "outdoor"
-    img[: H // 2] = (0.8, 0.8, 0.8)      # white ceiling
-    img[H // 2:] = (0.9, 0.9, 0.85)      # bright floor
+    img[: H // 2] = (0.8, 0.8, 0.8)  # white ceiling
+    img[H // 2 :] = (0.9, 0.9, 0.85)  # bright floor
     assert classify_scene(_lab_of(img), _lat(H))[0] == "indoor"
 
 
@@ -137,12 +141,12 @@ def test_hazy_sky_bluer_than_the_ground_is_outdoors():
     outdoors; the same cool white over a floor of the same tint is a ceiling: indoors."""
     H, W = 64, 128
     img = np.zeros((H, W, 3), np.float32)
-    img[: H // 2] = (0.52, 0.55, 0.59)   # hazy sky (b* -3.6), brighter than the ground
-    img[H // 2:] = (0.20, 0.19, 0.17)    # warm grey asphalt
+    img[: H // 2] = (0.52, 0.55, 0.59)  # hazy sky (b* -3.6), brighter than the ground
+    img[H // 2 :] = (0.20, 0.19, 0.17)  # warm grey asphalt
     lab = _lab_of(img)
     assert -5 < np.median(lab[: H // 4, :, 2]) < -2  # only slightly bluish: the fixed b* < -5 test misses it
     assert classify_scene(lab, _lat(H))[0] == "outdoor"
-    img[H // 2:] = (0.22, 0.23, 0.245)  # a floor almost as cool as the ceiling (b* -2.5)
+    img[H // 2 :] = (0.22, 0.23, 0.245)  # a floor almost as cool as the ceiling (b* -2.5)
     assert classify_scene(_lab_of(img), _lat(H))[0] == "indoor"
 
 
@@ -236,9 +240,17 @@ def test_gpano_crop_is_placed_into_the_full_canvas():
     from holoflow.io.image import place_cropped
 
     crop = np.ones((10, 40, 3), np.float32)
-    full, facts = place_cropped(crop, {"FullPanoWidthPixels": 80, "FullPanoHeightPixels": 40,
-                                       "CroppedAreaImageWidthPixels": 40, "CroppedAreaImageHeightPixels": 10,
-                                       "CroppedAreaLeftPixels": 60, "CroppedAreaTopPixels": 15})
+    full, facts = place_cropped(
+        crop,
+        {
+            "FullPanoWidthPixels": 80,
+            "FullPanoHeightPixels": 40,
+            "CroppedAreaImageWidthPixels": 40,
+            "CroppedAreaImageHeightPixels": 10,
+            "CroppedAreaLeftPixels": 60,
+            "CroppedAreaTopPixels": 15,
+        },
+    )
     assert full.shape == (40, 80, 3) and facts["cropped"]
     assert full[15:25, 60:80].all() and full[15:25, 0:20].all() and not full[:15].any()
 

@@ -1,5 +1,6 @@
 """Manhattan layout pieces: the horizontal vanishing directions, the wall states, the wall DP, and a
 synthetic rectangular room (rotated, off-centre) rendered from known geometry and recovered."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -71,7 +72,7 @@ def test_segment_evidence_lies_on_the_wall_boundaries():
     for dr in (-2, -1, 0, 1, 2):
         near |= np.roll(floor_edge, dr, axis=0)
     assert hit.sum() > W / 2 and (hit & near).sum() / hit.sum() > 0.95
-    assert above.sum() > 0 and (below[:, : H // 2].sum() == 0) and (above[:, H // 2:].sum() == 0)
+    assert above.sum() > 0 and (below[:, : H // 2].sum() == 0) and (above[:, H // 2 :].sum() == 0)
 
 
 def test_wall_distances_and_dp_recover_a_piecewise_room():
@@ -90,8 +91,17 @@ def test_wall_distances_and_dp_recover_a_piecewise_room():
     np.testing.assert_array_equal(manhattan_dp(cost, 5.0), truth)  # an integer path: exact on any CPU
 
 
-_COLOURS = np.array([(0.10, 0.09, 0.08), (0.85, 0.85, 0.85), (0.50, 0.40, 0.28), (0.42, 0.33, 0.24),
-                     (0.50, 0.40, 0.28), (0.42, 0.33, 0.24)], np.float32)  # floor, ceiling, 4 walls
+_COLOURS = np.array(
+    [
+        (0.10, 0.09, 0.08),
+        (0.85, 0.85, 0.85),
+        (0.50, 0.40, 0.28),
+        (0.42, 0.33, 0.24),
+        (0.50, 0.40, 0.28),
+        (0.42, 0.33, 0.24),
+    ],
+    np.float32,
+)  # floor, ceiling, 4 walls
 
 
 def _rendered_room(H, W, yaw, walls, h, ceiling):

@@ -1,5 +1,6 @@
 """The tiny-profile runs the e2e tests share: two stores built once per session (the pipeline takes
 a minute or more on a shared 2-core machine), and the `holoflow run` helper that built them."""
+
 import json
 import subprocess
 import sys
@@ -13,8 +14,21 @@ PROMPT = "a small wooden cabin"
 
 def holoflow_run(store: Path, *extra: str) -> dict:
     """`holoflow run PROMPT --profile tiny --json` into ``store``; its JSON summary."""
-    cmd = [sys.executable, "-m", "holoflow", "run", PROMPT, "--pipeline", str(ROOT / "pipeline.yaml"),
-           "--profile", "tiny", "--store", str(store), "--json", *extra]
+    cmd = [
+        sys.executable,
+        "-m",
+        "holoflow",
+        "run",
+        PROMPT,
+        "--pipeline",
+        str(ROOT / "pipeline.yaml"),
+        "--profile",
+        "tiny",
+        "--store",
+        str(store),
+        "--json",
+        *extra,
+    ]
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout)

@@ -1,6 +1,7 @@
 """The paper's path end to end: every real engine in one run (`--profile paper,tiny`) with random tiny
 models of the real architectures (`holoflow models random DIR`), on the CPU in CI and with gsplat on
 CUDA where a GPU is present; and what a machine with no weights says."""
+
 import json
 import os
 import subprocess
@@ -11,9 +12,15 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PROMPT = "a cozy library"
-REAL = {"base_pano": "diffusion360", "stylize": "controlnet_lineart", "upscale": "realesrgan",
-        "detail": "controlnet_tile", "tangent_depth": "depth_anything", "metric_align": "zoedepth",
-        "inp_set": "lama"}
+REAL = {
+    "base_pano": "diffusion360",
+    "stylize": "controlnet_lineart",
+    "upscale": "realesrgan",
+    "detail": "controlnet_tile",
+    "tangent_depth": "depth_anything",
+    "metric_align": "zoedepth",
+    "inp_set": "lama",
+}
 
 pytestmark = [pytest.mark.models, pytest.mark.slow]
 
@@ -21,24 +28,41 @@ pytestmark = [pytest.mark.models, pytest.mark.slow]
 def holoflow(*args: str, hf_home: Path | None = None) -> subprocess.CompletedProcess:
     """`holoflow ARGS` in the project root; ``hf_home``: an empty HF cache (no weights on this machine)."""
     env = {**os.environ, **({"HF_HOME": str(hf_home)} if hf_home is not None else {})}
-    return subprocess.run([sys.executable, "-m", "holoflow", *args], cwd=ROOT, capture_output=True, text=True,
-                          timeout=900, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "holoflow", *args], cwd=ROOT, capture_output=True, text=True, timeout=900, env=env
+    )
 
 
 @pytest.fixture(scope="module")
 def models(tmp_path_factory):
     pytest.importorskip("diffusers")
     folder = tmp_path_factory.mktemp("models")
-    done = subprocess.run([sys.executable, "-m", "holoflow", "models", "random", str(folder)], cwd=ROOT,
-                          capture_output=True, text=True, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-m", "holoflow", "models", "random", str(folder)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert json.loads((folder / "manifest.json").read_text())["kind"] == "random"
     return folder
 
 
 def run_paper_tiny(models: Path, store: Path, device: str) -> dict:
-    done = holoflow("run", PROMPT, "--profile", "paper,tiny", "--models", str(models), "--device", device,
-                    "--json", "--store", str(store))
+    done = holoflow(
+        "run",
+        PROMPT,
+        "--profile",
+        "paper,tiny",
+        "--models",
+        str(models),
+        "--device",
+        device,
+        "--json",
+        "--store",
+        str(store),
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout)
 
@@ -77,8 +101,9 @@ def test_without_weights_models_list_names_all_and_run_fails_in_one_line(tmp_pat
         assert f" {engine} " in listing.stdout and f"{stage}.model" in listing.stdout
     assert "MISSING" in listing.stdout and "hf download" in listing.stdout
     store = tmp_path / "store"
-    done = holoflow("run", PROMPT, "--profile", "paper", "--device", "cpu", "--store", str(store),
-                    hf_home=tmp_path / "hf")
+    done = holoflow(
+        "run", PROMPT, "--profile", "paper", "--device", "cpu", "--store", str(store), hf_home=tmp_path / "hf"
+    )
     assert done.returncode == 2
     err = done.stderr.strip().splitlines()
     assert len(err) == 1 and "not found locally" in err[0] and "holoflow models list" in err[0]
@@ -94,7 +119,23 @@ def test_profile_asking_for_cuda_fails_in_one_line_without_it(tmp_path):
     text = (ROOT / "pipeline.yaml").read_text().replace("    device: auto ", "    device: cuda ")
     pipeline.write_text(text)
     (tmp_path / "stages").symlink_to(ROOT / "stages")
-    done = subprocess.run([sys.executable, "-m", "holoflow", "run", PROMPT, "--profile", "paper,tiny",
-                           "--pipeline", str(pipeline), "--dry-run"], cwd=ROOT, capture_output=True, text=True,
-                          timeout=120, env={**os.environ, "HOLOFLOW_DEVICE": ""})
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "holoflow",
+            "run",
+            PROMPT,
+            "--profile",
+            "paper,tiny",
+            "--pipeline",
+            str(pipeline),
+            "--dry-run",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "HOLOFLOW_DEVICE": ""},
+    )
     assert done.returncode == 2 and "--device cpu" in done.stderr and len(done.stderr.strip().splitlines()) == 1

@@ -3,6 +3,7 @@
 Two runs into two separate stores must produce byte-identical artifacts (every random choice is
 seeded), a rerun must be fully cached, and the final scene must be a readable 3DGS PLY.
 """
+
 import json
 import subprocess
 import sys
@@ -13,8 +14,21 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 
-STAGES = ["base_pano", "stylize", "upscale", "detail", "tangent_depth", "metric_align", "point_cloud",
-          "pcd_set", "pano_set", "pre_opt", "inp_set", "transfer_opt", "export"]
+STAGES = [
+    "base_pano",
+    "stylize",
+    "upscale",
+    "detail",
+    "tangent_depth",
+    "metric_align",
+    "point_cloud",
+    "pcd_set",
+    "pano_set",
+    "pre_opt",
+    "inp_set",
+    "transfer_opt",
+    "export",
+]
 
 
 def test_every_stage_ran(two_runs):
@@ -41,8 +55,22 @@ def test_scene_is_a_standard_3dgs_ply(two_runs):
     scene = next((store / "runs").glob("*/transfer_opt/scene.ply"))
     vertex = PlyData.read(str(scene))["vertex"]
     names = set(vertex.data.dtype.names)
-    expected = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
-                "rot_0", "rot_1", "rot_2", "rot_3"}
+    expected = {
+        "x",
+        "y",
+        "z",
+        "f_dc_0",
+        "f_dc_1",
+        "f_dc_2",
+        "opacity",
+        "scale_0",
+        "scale_1",
+        "scale_2",
+        "rot_0",
+        "rot_1",
+        "rot_2",
+        "rot_3",
+    }
     assert expected <= names
     assert vertex.count > 100
     xyz = np.stack([vertex["x"], vertex["y"], vertex["z"]], 1)
@@ -74,22 +102,47 @@ def test_eval_run_prints_the_viewing_size_table(two_runs, tmp_path):
     fraction and (a procedural scene) their PSNR against truth, each beside its goal."""
     store, _, _ = two_runs
     out = tmp_path / "view.json"
-    cmd = [sys.executable, "-m", "holoflow", "eval", "--run", "latest", "--store", str(store), "--size", "192",
-           "--nr-cameras", "2", "--json", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "holoflow",
+        "eval",
+        "--run",
+        "latest",
+        "--store",
+        str(store),
+        "--size",
+        "192",
+        "--nr-cameras",
+        "2",
+        "--json",
+        str(out),
+    ]
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     r = json.loads(out.read_text())
     assert r["run"] == (store / "latest").readlink().name and r["engines"]["tangent_depth"] == "auto -> simulated"
     b = r["base"]
-    assert (b["cameras"], b["polar_cameras"]) == (10, 2)          # the tiny rig: 12 cameras, only the poles polar
-    assert all(np.isfinite(v) for v in (b["psnr"], b["ssim"], b["polar_psnr"], r["nr"]["niqe"]["ratio"],
-                                        r["nr"]["brisque"]["ratio"]))
+    assert (b["cameras"], b["polar_cameras"]) == (10, 2)  # the tiny rig: 12 cameras, only the poles polar
+    assert all(
+        np.isfinite(v)
+        for v in (b["psnr"], b["ssim"], b["polar_psnr"], r["nr"]["niqe"]["ratio"], r["nr"]["brisque"]["ratio"])
+    )
     assert sorted(r["novel"]) == ["0.25", "0.5", "1"] and all(0 <= n["empty"] <= 1 for n in r["novel"].values())
-    assert all(np.isfinite(n["psnr"]) for n in r["novel"].values())    # procedural: truth exists
+    assert all(np.isfinite(n["psnr"]) for n in r["novel"].values())  # procedural: truth exists
     assert r["source"].startswith("detail panorama")
-    for text in ("base PSNR dB (10 cameras)", ">= 32.00", "BRISQUE render / source", "zenith/nadir gap",
-                 "novel 0.5 m empty %", "<= 0.50 %", "goal (preview)", "tangent_depth=auto -> simulated"):
+    for text in (
+        "base PSNR dB (10 cameras)",
+        ">= 32.00",
+        "BRISQUE render / source",
+        "zenith/nadir gap",
+        "novel 0.5 m empty %",
+        "<= 0.50 %",
+        "goal (preview)",
+        "tangent_depth=auto -> simulated",
+    ):
         assert text in done.stdout, text
-    bad = subprocess.run(cmd[:5] + ["no-such-run", "--store", str(store)], cwd=ROOT, capture_output=True, text=True,
-                         timeout=600)
+    bad = subprocess.run(
+        cmd[:5] + ["no-such-run", "--store", str(store)], cwd=ROOT, capture_output=True, text=True, timeout=600
+    )
     assert bad.returncode == 2 and "no finished run 'no-such-run'" in bad.stderr

@@ -4,6 +4,7 @@ process and a free port behind.
 
 Skips without chromium, unless HOLOFLOW_REQUIRE_CHROMIUM=1 (set by .ci/run) makes that a failure.
 """
+
 import os
 import re
 import signal
@@ -18,8 +19,8 @@ import pytest
 from holoflow.report import chromium
 
 ROOT = Path(__file__).resolve().parents[2]
-WIDTH, HEIGHT, FOV_DEG = 800, 600, 75.0        # window (CSS px) and viser's default vertical fov
-PATCH_DEG = 10.0                               # half-size of the compared patch around the view's centre
+WIDTH, HEIGHT, FOV_DEG = 800, 600, 75.0  # window (CSS px) and viser's default vertical fov
+PATCH_DEG = 10.0  # half-size of the compared patch around the view's centre
 
 
 def _need_chromium():
@@ -55,16 +56,16 @@ def _pano_centre_colour(run: Path) -> np.ndarray:
     from holoflow.imageops.color import linear_to_uint8
     from holoflow.io.exr import read_rgb
 
-    pano = linear_to_uint8(read_rgb(run / "detail" / "pano.exr")).astype(np.float64)   # [H, W, 3]
+    pano = linear_to_uint8(read_rgb(run / "detail" / "pano.exr")).astype(np.float64)  # [H, W, 3]
     H, W = pano.shape[:2]
     d = max(1, round(PATCH_DEG / 360 * W))
-    return pano[H // 2 - d:H // 2 + d, W // 2 - d:W // 2 + d].reshape(-1, 3).mean(0)
+    return pano[H // 2 - d : H // 2 + d, W // 2 - d : W // 2 + d].reshape(-1, 3).mean(0)
 
 
 def _centre(shot: np.ndarray) -> np.ndarray:
     """The screenshot's [HEIGHT, WIDTH, 3] pixels within PATCH_DEG of the view centre: [n, 3]."""
     half = round(np.tan(np.radians(PATCH_DEG)) / np.tan(np.radians(FOV_DEG / 2)) * HEIGHT / 2)
-    return shot[HEIGHT // 2 - half:HEIGHT // 2 + half, WIDTH // 2 - half:WIDTH // 2 + half].reshape(-1, 3)
+    return shot[HEIGHT // 2 - half : HEIGHT // 2 + half, WIDTH // 2 - half : WIDTH // 2 + half].reshape(-1, 3)
 
 
 def test_viewer_draws_the_scene_and_stops_cleanly(two_runs, tmp_path):
@@ -75,8 +76,12 @@ def test_viewer_draws_the_scene_and_stops_cleanly(two_runs, tmp_path):
     run = store / "runs" / first["run"]
     log = tmp_path / "view.log"
     with open(log, "w") as out:
-        proc = subprocess.Popen([sys.executable, "-m", "holoflow", "view", first["run"], "--store", str(store),
-                                 "--port", "0"], cwd=ROOT, stdout=out, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "holoflow", "view", first["run"], "--store", str(store), "--port", "0"],
+            cwd=ROOT,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
     try:
         url = _wait_for_url(proc, log)
         assert url.startswith("http://127.0.0.1:")
@@ -85,8 +90,9 @@ def test_viewer_draws_the_scene_and_stops_cleanly(two_runs, tmp_path):
         # first budget (seen: centre 153-178 against 125, the white page showing through): one
         # second look with a longer budget; the test fails when both miss the panorama's colour
         for budget in (15000, 45000):
-            png = chromium.screenshot(url, tmp_path / f"view-{budget}.png", WIDTH, HEIGHT, timeout=180,
-                                      webgl=True, budget_ms=budget)
+            png = chromium.screenshot(
+                url, tmp_path / f"view-{budget}.png", WIDTH, HEIGHT, timeout=180, webgl=True, budget_ms=budget
+            )
             centre = _centre(iio.imread(png)[..., :3].astype(np.float64))
             if np.abs(centre.mean(0) - expected).max() < 25:
                 break

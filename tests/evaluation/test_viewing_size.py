@@ -1,4 +1,5 @@
 """holoflow.evaluation.viewing_size: the viewing-size scorer (issue 31) on cases whose answer is known."""
+
 import math
 
 import numpy as np
@@ -39,7 +40,7 @@ def test_polar_split_picks_the_cameras_near_the_zenith_and_nadir():
     vm = base_rig(38)
     polar = viewing.polar_views(vm, 25.0)
     axis = vm[:, 2, :3].double()
-    angle = torch.rad2deg(torch.acos(axis[:, 1].abs().clamp(max=1)))       # degrees to the nearer pole
+    angle = torch.rad2deg(torch.acos(axis[:, 1].abs().clamp(max=1)))  # degrees to the nearer pole
     assert torch.equal(polar, angle <= 25.0)
     # the rig's layout (poles + spiral heights -1 + (2 i + 1) / 36): the two poles and the two spiral
     # cameras nearest each
@@ -76,14 +77,18 @@ def test_an_empty_region_counts_as_empty():
     model = pano_model(pano, drop=lambda d: d[:, 2] > 0.2)
     from holoflow.geometry.camera import look_at
 
-    vm = torch.cat([look_at(torch.zeros(1, 3), torch.tensor([[0.0, 0, 1]])),
-                    look_at(torch.zeros(1, 3), torch.tensor([[0.0, 0, -1]]))]).float()
+    vm = torch.cat(
+        [
+            look_at(torch.zeros(1, 3), torch.tensor([[0.0, 0, 1]])),
+            look_at(torch.zeros(1, 3), torch.tensor([[0.0, 0, -1]])),
+        ]
+    ).float()
     K = viewing.view_intrinsics(32, 60.0)
     _, alpha = viewing.render_at(model, vm, K, 32)
     r = viewing.novel_scores(alpha, torch.zeros(2), (1.0, 2.0), 0.5)
     assert r["1"]["empty"] == 1.0 and r["2"]["empty"] == 0.0
     a = torch.ones(4, 8, 8)
-    a[1, :2] = 0.2                                       # a quarter of one image of the first distance
+    a[1, :2] = 0.2  # a quarter of one image of the first distance
     r = viewing.novel_scores(a, torch.tensor([0.1, 0.2, 1.0, 1.0]), (0.25, 1.0), 0.5)
     assert r["0.25"]["empty"] == pytest.approx(1 / 8) and r["1"]["empty"] == 0.0
     assert r["0.25"]["offset_m"] == pytest.approx(0.15) and r["0.25"]["per_camera_empty"] == [0.0, 0.25]
@@ -96,9 +101,10 @@ def test_novel_rig_is_seeded_and_stays_short_of_walls():
     from holoflow.geometry.camera import camera_centers
 
     eyes = camera_centers(vm.double())
-    assert torch.allclose(eyes.norm(dim=1), torch.tensor([0.25] * 8 + [0.5] * 8 + [1.0] * 8, dtype=torch.float64),
-                          atol=1e-5)
-    assert torch.allclose(eyes[:, 1], torch.zeros(24, dtype=torch.float64), atol=1e-6)   # horizontal moves
+    assert torch.allclose(
+        eyes.norm(dim=1), torch.tensor([0.25] * 8 + [0.5] * 8 + [1.0] * 8, dtype=torch.float64), atol=1e-5
+    )
+    assert torch.allclose(eyes[:, 1], torch.zeros(24, dtype=torch.float64), atol=1e-6)  # horizontal moves
     # a wall 0.9 m away in every direction: eyes stop 0.3 m short of it
     vm, off = viewing.novel_rig((0.25, 0.5, 1.0), 8, seed=3, free=lambda d: torch.full((len(d),), 0.9))
     assert torch.allclose(off, torch.tensor([0.25] * 8 + [0.5] * 8 + [0.6] * 8, dtype=torch.float64))
@@ -112,7 +118,7 @@ def test_free_distance_reads_the_depth_panorama():
     from holoflow.geometry.sphere import equirect_directions
 
     depth = torch.full((32, 64), 2.0)
-    depth[:8] = math.inf                                 # sky above
+    depth[:8] = math.inf  # sky above
     dirs = torch.tensor([[0.0, 0, 1], [0.0, -1, 0], [1.0, 0, 0]])
     d = viewing.free_distance(depth, dirs)
     assert d.tolist() == [2.0, math.inf, 2.0]
@@ -141,21 +147,34 @@ def test_source_views_of_a_photo_are_read_from_the_recorded_file(tmp_path):
     src = viewing.run_source(run, info)
     assert src.kind.startswith("photo room.png (128x64)") and not src.notes
     assert torch.equal(src.pano, torch.from_numpy(rgb).permute(2, 0, 1))
-    photo.write_bytes(photo.read_bytes() + b"x")                  # the file changed since the run
+    photo.write_bytes(photo.read_bytes() + b"x")  # the file changed since the run
     src = viewing.run_source(run, info)
     assert src.kind.startswith("imported") and "changed" in src.notes[0]
     assert torch.allclose(src.pano, torch.from_numpy(rgb * 0.5).permute(2, 0, 1))
 
 
 def test_table_names_each_goal_and_whether_it_is_met():
-    scores = {"spec": {"size": 512, "fov_deg": 47.43, "pole_deg": 25.0, "empty_alpha": 0.5, "wall_margin": 0.3,
-                       "seed": 0},
-              "base": {"cameras": 32, "polar_cameras": 6, "psnr": 33.0, "ssim": 0.9, "polar_psnr": 30.0,
-                       "polar_ssim": 0.8, "polar_gap_db": 3.0},
-              "nr": {"cameras": 12, "niqe": {"render": 5.5, "source": 5.0, "ratio": 1.1},
-                     "brisque": None, "unavailable": {"brisque": "no package"}},
-              "novel": {"0.5": {"cameras": 8, "empty": 0.001, "offset_m": 0.5}},
-              "source": "photo x.jpg", "gaussians": 10}
+    scores = {
+        "spec": {"size": 512, "fov_deg": 47.43, "pole_deg": 25.0, "empty_alpha": 0.5, "wall_margin": 0.3, "seed": 0},
+        "base": {
+            "cameras": 32,
+            "polar_cameras": 6,
+            "psnr": 33.0,
+            "ssim": 0.9,
+            "polar_psnr": 30.0,
+            "polar_ssim": 0.8,
+            "polar_gap_db": 3.0,
+        },
+        "nr": {
+            "cameras": 12,
+            "niqe": {"render": 5.5, "source": 5.0, "ratio": 1.1},
+            "brisque": None,
+            "unavailable": {"brisque": "no package"},
+        },
+        "novel": {"0.5": {"cameras": 8, "empty": 0.001, "offset_m": 0.5}},
+        "source": "photo x.jpg",
+        "gaussians": 10,
+    }
     text = "\n".join(viewing.table(scores, "preview"))
     assert "33.00" in text and ">= 32.00" in text and "no package" in text
     lines = {ln.split("  ")[1].strip(): ln for ln in text.splitlines() if ln.startswith("  ")}

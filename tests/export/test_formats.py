@@ -10,6 +10,7 @@ Bounds (from each format's quantisation; rgb = 0.5 + SH_C0 * f_dc, opacity post-
 | scene.compressed.ply | 0.5 / 1023 of its chunk's extent | 0.5 / 255 of its chunk's colour range | 0.5 / 255 |
 | scene.glb | float32 | float32 | float32 |
 """
+
 import numpy as np
 import pytest
 import torch
@@ -43,15 +44,15 @@ def scene_fields(n: int = 1000, sh_degree: int = 0, seed: int = 0) -> dict:
     rng = np.random.default_rng(seed)
     k = (sh_degree + 1) ** 2 - 1
     f = {c: rng.uniform(-4, 4, n) for c in "xyz"}
-    f.update({f"f_dc_{i}": rng.uniform(-1.7, 1.7, n) for i in range(3)})        # rgb in [0.02, 0.98]
+    f.update({f"f_dc_{i}": rng.uniform(-1.7, 1.7, n) for i in range(3)})  # rgb in [0.02, 0.98]
     f.update({f"f_rest_{i}": rng.uniform(-0.4, 0.4, n) for i in range(3 * k)})
     f["opacity"] = rng.uniform(-5, 5, n)
     f.update({f"scale_{i}": rng.uniform(-6, 0, n) for i in range(3)})
     f.update({f"rot_{i}": rng.normal(size=n) for i in range(4)})
     if n >= 5:
         for i in range(4):
-            f[f"rot_{i}"][0] = 0.0                        # zero quaternion -> identity
-        f["opacity"][1], f["opacity"][2] = -30.0, 30.0    # saturated
+            f[f"rot_{i}"][0] = 0.0  # zero quaternion -> identity
+        f["opacity"][1], f["opacity"][2] = -30.0, 30.0  # saturated
         for i in range(3):
             f[f"scale_{i}"][3], f[f"scale_{i}"][4] = -9.5, 1.5
     return {key: np.asarray(v, np.float32) for key, v in f.items()}
@@ -61,9 +62,13 @@ def read_splat(data: bytes) -> dict:
     """The antimatter15 layout, parsed from its description (not from holoflow's writer)."""
     rec = np.frombuffer(data, SPLAT_DTYPE)
     q = (rec["rotation"].astype(np.float64) - 128.0) / 128.0
-    return {"means": rec["position"].astype(np.float64), "scales": rec["scale"].astype(np.float64),
-            "rgb": rec["rgba"][:, :3] / 255.0, "opacity": rec["rgba"][:, 3] / 255.0,
-            "quats": q / np.linalg.norm(q, axis=1, keepdims=True)}
+    return {
+        "means": rec["position"].astype(np.float64),
+        "scales": rec["scale"].astype(np.float64),
+        "rgb": rec["rgba"][:, :3] / 255.0,
+        "opacity": rec["rgba"][:, 3] / 255.0,
+        "quats": q / np.linalg.norm(q, axis=1, keepdims=True),
+    }
 
 
 def match(ref: np.ndarray, got: np.ndarray) -> np.ndarray:
@@ -105,15 +110,15 @@ def test_spz_round_trip_through_gsply(ref, tmp_path):
     (tmp_path / "s.spz").write_bytes(spz_bytes(ref))
     g = gsply.read_spz(tmp_path / "s.spz")
     means = np.asarray(g.means, np.float64)
-    np.testing.assert_array_less(np.abs(means - ref.means @ F), 0.5 / 2 ** 12 + 1e-6)    # RUB axes
+    np.testing.assert_array_less(np.abs(means - ref.means @ F), 0.5 / 2**12 + 1e-6)  # RUB axes
     rgb = 0.5 + SH_C0 * np.asarray(g.sh0, np.float64)
     assert np.abs(rgb - ref.rgb).max() <= 0.5 * SH_C0 / (0.15 * 255) + 1e-6
     assert np.abs(sig(np.asarray(g.opacities, np.float64)) - ref.opacities).max() <= 0.5 / 255 + 1e-4
     inside = (np.log(ref.scales) > -10) & (np.log(ref.scales) < 5.9)
     assert np.abs(np.asarray(g.scales)[inside] - np.log(ref.scales)[inside]).max() <= 0.5 / 16 + 1e-5
-    q = np.asarray(g.quats, np.float64)                                              # (w, x, y, z)
+    q = np.asarray(g.quats, np.float64)  # (w, x, y, z)
     want = ref.quats * [1, 1, -1, -1]
-    assert np.abs(np.abs((q * want).sum(1))).min() > 0.998                             # same rotation up to sign
+    assert np.abs(np.abs((q * want).sum(1))).min() > 0.998  # same rotation up to sign
 
 
 def test_spz_is_deterministic(ref):
@@ -124,13 +129,13 @@ def test_splat_round_trip(ref):
     got = read_splat(splat_bytes(ref))
     assert len(got["means"]) == len(ref)
     idx = match(ref.means, got["means"])
-    np.testing.assert_allclose(got["means"][idx], ref.means, rtol=1e-6, atol=1e-6)   # holoflow's frame
+    np.testing.assert_allclose(got["means"][idx], ref.means, rtol=1e-6, atol=1e-6)  # holoflow's frame
     np.testing.assert_allclose(got["scales"][idx], ref.scales, rtol=1e-6)
     assert np.abs(got["rgb"][idx] - np.clip(ref.rgb, 0, 1)).max() <= 0.5 / 255 + 1e-9
     assert np.abs(got["opacity"][idx] - ref.opacities).max() <= 0.5 / 255 + 1e-9
     assert np.abs((got["quats"][idx] * ref.quats).sum(1)).min() > 0.995
     size = np.prod(got["scales"], 1) * got["opacity"]
-    assert size[0] >= size[-1]                                                         # largest first
+    assert size[0] >= size[-1]  # largest first
 
 
 def test_compressed_ply_round_trip_through_gsply(ref, tmp_path):
@@ -140,15 +145,15 @@ def test_compressed_ply_round_trip_through_gsply(ref, tmp_path):
     idx = match(ref.means, means)
     extent = ref.means.max(0) - ref.means.min(0)
     err = np.abs(means[idx] - ref.means)
-    assert (err <= 0.5 * extent / 1023 + 1e-5).all()          # a chunk's extent <= the scene's
-    assert err.mean() < 0.01 * extent.max() / 1023 * 50        # chunks are far tighter than the scene
+    assert (err <= 0.5 * extent / 1023 + 1e-5).all()  # a chunk's extent <= the scene's
+    assert err.mean() < 0.01 * extent.max() / 1023 * 50  # chunks are far tighter than the scene
     rgb = 0.5 + SH_C0 * np.asarray(g.sh0, np.float64)[idx]
     assert np.abs(rgb - ref.rgb).max() <= 0.5 / 255 + 1e-5
     op = sig(np.asarray(g.opacities, np.float64)[idx])
     assert np.abs(op - ref.opacities).max() <= 0.5 / 255 + 1e-4
     q = np.asarray(g.quats, np.float64)[idx]
     assert np.abs((q * ref.quats).sum(1)).min() > 0.998
-    log_range = np.ptp(np.log(ref.scales), axis=0)                                    # >= any chunk's
+    log_range = np.ptp(np.log(ref.scales), axis=0)  # >= any chunk's
     assert (np.abs(np.asarray(g.scales)[idx] - np.log(ref.scales)) <= 0.5 * log_range / 1023 + 1e-4).all()
 
 
@@ -159,13 +164,14 @@ def test_gaussian_glb_round_trip_through_pygltflib(ref, tmp_path):
     prim = gl.meshes[0].primitives[0]
     assert prim.mode == 0 and prim.extensions["KHR_gaussian_splatting"]["kernel"] == "ellipse"
     a = gltf_attributes(gl)
-    np.testing.assert_allclose(a["POSITION"], ref.means @ F, atol=1e-6)              # +Y up
-    np.testing.assert_allclose(a["KHR_gaussian_splatting:SCALE"], ref.scales, rtol=1e-6)   # linear
+    np.testing.assert_allclose(a["POSITION"], ref.means @ F, atol=1e-6)  # +Y up
+    np.testing.assert_allclose(a["KHR_gaussian_splatting:SCALE"], ref.scales, rtol=1e-6)  # linear
     np.testing.assert_allclose(a["KHR_gaussian_splatting:OPACITY"], ref.opacities, atol=1e-7)
     np.testing.assert_allclose(0.5 + SH_C0 * a["KHR_gaussian_splatting:SH_DEGREE_0_COEF_0"], ref.rgb, atol=1e-6)
     xyzw = a["KHR_gaussian_splatting:ROTATION"]
-    np.testing.assert_allclose(cov(xyzw[:, [3, 0, 1, 2]], a["KHR_gaussian_splatting:SCALE"]),
-                               F @ cov(ref.quats, ref.scales) @ F, atol=1e-5)
+    np.testing.assert_allclose(
+        cov(xyzw[:, [3, 0, 1, 2]], a["KHR_gaussian_splatting:SCALE"]), F @ cov(ref.quats, ref.scales) @ F, atol=1e-5
+    )
 
 
 def gltf_attributes(gl) -> dict:
@@ -180,8 +186,11 @@ def gltf_attributes(gl) -> dict:
         comps = {"SCALAR": 1, "VEC3": 3, "VEC4": 4}[acc.type]
         dt = {5126: "<f4", 5125: "<u4"}[acc.componentType]
         arr = np.frombuffer(blob, dt, acc.count * comps, view.byteOffset + (acc.byteOffset or 0))
-        out[name] = arr.reshape(acc.count, comps).squeeze(-1).astype(np.float64) if comps == 1 else \
-            arr.reshape(acc.count, comps).astype(np.float64)
+        out[name] = (
+            arr.reshape(acc.count, comps).squeeze(-1).astype(np.float64)
+            if comps == 1
+            else arr.reshape(acc.count, comps).astype(np.float64)
+        )
     return out
 
 
@@ -193,9 +202,9 @@ def test_axes_forward_up_right(tmp_path):
     f = scene_fields(3)
     for i, c in enumerate("xyz"):
         f[c] = pos[:, i].astype(np.float32)
-    for i, v in enumerate(np.log([0.05, 1.0, 0.05])):                 # long along the local y axis
+    for i, v in enumerate(np.log([0.05, 1.0, 0.05])):  # long along the local y axis
         f[f"scale_{i}"] = np.full(3, v, np.float32)
-    for i, v in enumerate([1.0, 0, 0, 0]):                              # identity: long along holoflow's y
+    for i, v in enumerate([1.0, 0, 0, 0]):  # identity: long along holoflow's y
         f[f"rot_{i}"] = np.full(3, v, np.float32)
     s = activate(f)
     want = np.array([[0, 0, -5.0], [0, 2.0, 0], [3.0, 0, 0]])
@@ -205,9 +214,11 @@ def test_axes_forward_up_right(tmp_path):
     (tmp_path / "a.glb").write_bytes(gaussians_glb_bytes(s))
     a = gltf_attributes(pygltflib.GLTF2().load(str(tmp_path / "a.glb")))
     np.testing.assert_allclose(a["POSITION"], want, atol=1e-6)
-    for q_wxyz, sc in ((np.asarray(g.quats, np.float64), np.exp(np.asarray(g.scales, np.float64))),
-                       (a["KHR_gaussian_splatting:ROTATION"][:, [3, 0, 1, 2]], a["KHR_gaussian_splatting:SCALE"])):
-        long_axis = np.linalg.eigh(cov(q_wxyz, sc))[1][:, :, -1]           # [3, 3] principal direction
+    for q_wxyz, sc in (
+        (np.asarray(g.quats, np.float64), np.exp(np.asarray(g.scales, np.float64))),
+        (a["KHR_gaussian_splatting:ROTATION"][:, [3, 0, 1, 2]], a["KHR_gaussian_splatting:SCALE"]),
+    ):
+        long_axis = np.linalg.eigh(cov(q_wxyz, sc))[1][:, :, -1]  # [3, 3] principal direction
         np.testing.assert_allclose(np.abs(long_axis[:, 1]), 1.0, atol=1e-2)
     splat_means = read_splat(splat_bytes(s))["means"]
     np.testing.assert_allclose(splat_means[match(pos, splat_means)], pos, atol=1e-6)
@@ -232,8 +243,9 @@ def test_sh_rotates_with_the_axes(tmp_path):
     np.testing.assert_allclose(got, want, atol=1e-12)
     (tmp_path / "h.glb").write_bytes(gaussians_glb_bytes(s))
     a = gltf_attributes(pygltflib.GLTF2().load(str(tmp_path / "h.glb")))
-    np.testing.assert_allclose(a["KHR_gaussian_splatting:SH_DEGREE_3_COEF_6"], s.sh_rest[:, 14] * SH_FLIP[14],
-                               atol=1e-7)
+    np.testing.assert_allclose(
+        a["KHR_gaussian_splatting:SH_DEGREE_3_COEF_6"], s.sh_rest[:, 14] * SH_FLIP[14], atol=1e-7
+    )
     (tmp_path / "h.spz").write_bytes(spz_bytes(s))
     g = gsply.read_spz(tmp_path / "h.spz")
     assert np.abs(np.asarray(g.shN, np.float64) - s.sh_rest * SH_FLIP[:, None]).max() <= 0.5 / 128 + 1e-6
@@ -254,7 +266,7 @@ def box_room(H=64, W=128, sky_rows=8):
     t = np.min(np.where(np.abs(d) > 1e-9, half / np.maximum(np.abs(d), 1e-9), np.inf), axis=-1)
     c = np.array([0, 0, 2.0])
     b = d @ c
-    disc = b ** 2 - (c @ c - 0.25)
+    disc = b**2 - (c @ c - 0.25)
     tb = np.where(disc > 0, b - np.sqrt(np.maximum(disc, 0)), np.inf)
     t = np.minimum(t, tb)
     t[:sky_rows] = np.inf
@@ -270,8 +282,8 @@ def test_mesh_cuts_discontinuities_and_faces_the_centre():
     assert inward.mean() > 0.99
     r = np.linalg.norm(v, axis=1)
     spread = np.ptp(r[f], axis=1) / r[f].min(1)
-    assert spread.max() <= 0.4 + 1e-9                     # no triangle bridges the ball and the wall
-    assert (r > 6).any()                                  # the dome (2x the 99th percentile depth)
+    assert spread.max() <= 0.4 + 1e-9  # no triangle bridges the ball and the wall
+    assert (r > 6).any()  # the dome (2x the 99th percentile depth)
     v2, _, f2 = rgbd_mesh(rgb, depth, sky="omit")
     assert np.linalg.norm(v2, axis=1).max() < 5 and len(f2) < len(f)
     # the ball's silhouette is open: some triangles were cut between it and the wall behind
@@ -285,16 +297,16 @@ def test_mesh_glb_opens_in_trimesh_with_axes_and_colours(tmp_path):
     (tmp_path / "mesh.glb").write_bytes(mesh_glb_bytes(v, c, f))
     scene = trimesh.load(str(tmp_path / "mesh.glb"), process=False)
     (m,) = scene.geometry.values()
-    np.testing.assert_allclose(scene.graph[scene.graph.nodes_geometry[0]][0], np.eye(4))   # no node transform
+    np.testing.assert_allclose(scene.graph[scene.graph.nodes_geometry[0]][0], np.eye(4))  # no node transform
     assert len(m.faces) == len(f) and len(m.vertices) == len(v)
-    np.testing.assert_allclose(m.vertices, v @ F, atol=1e-5)                           # +Y up
+    np.testing.assert_allclose(m.vertices, v @ F, atol=1e-5)  # +Y up
     # with a material trimesh keeps COLOR_0 as a vertex attribute (floats, linear as written)
     colours = np.asarray(m.visual.vertex_attributes["color"], np.float64)[:, :3]
     np.testing.assert_allclose(colours, np.clip(c, 0, 1), atol=1e-6)
     unit = v / np.linalg.norm(v, axis=1, keepdims=True)
-    ahead = m.vertices[np.argmax(unit[:, 2])]                                          # holoflow's forward: the ball
+    ahead = m.vertices[np.argmax(unit[:, 2])]  # holoflow's forward: the ball
     assert ahead[2] < -1 and abs(ahead[1]) < 0.2 and abs(ahead[0]) < 0.2
-    floor = m.vertices[np.argmax(unit[:, 1])]                                          # holoflow's down
+    floor = m.vertices[np.argmax(unit[:, 1])]  # holoflow's down
     assert floor[1] < -1 and abs(floor[0]) < 0.2 and abs(floor[2]) < 0.2
     gl = pygltflib.GLTF2().load(str(tmp_path / "mesh.glb"))
     assert gl.meshes[0].primitives[0].mode == 4 and "KHR_materials_unlit" in gl.extensionsUsed

@@ -1,4 +1,5 @@
 """The fault and load tests share one undisturbed tiny run (the reference, built once per session)."""
+
 from pathlib import Path
 
 import pytest

@@ -1,5 +1,6 @@
 """Helpers of the fault and load tests: copy a reference store into one whose last step (export) is
 still to compute, run `holoflow` as a process, find a step's process, compare a run's final bytes."""
+
 import json
 import os
 import shutil
@@ -14,15 +15,27 @@ PROMPT = "a small wooden cabin"
 TAIL = "export"
 
 
-def holoflow(store: Path, *args: str, timeout: float = 600, env: dict | None = None,
-             prompt: str | None = PROMPT) -> subprocess.CompletedProcess:
+def holoflow(
+    store: Path, *args: str, timeout: float = 600, env: dict | None = None, prompt: str | None = PROMPT
+) -> subprocess.CompletedProcess:
     """`holoflow COMMAND [PROMPT] --profile tiny --store STORE ...` as a process (text output)."""
-    cmd = [sys.executable, "-m", "holoflow", *args[:1], *([prompt] if args[:1] == ("run",) and prompt else []),
-           "--pipeline", str(ROOT / "pipeline.yaml"), "--store", str(store), *args[1:]]
+    cmd = [
+        sys.executable,
+        "-m",
+        "holoflow",
+        *args[:1],
+        *([prompt] if args[:1] == ("run",) and prompt else []),
+        "--pipeline",
+        str(ROOT / "pipeline.yaml"),
+        "--store",
+        str(store),
+        *args[1:],
+    ]
     if args[:1] in (("run",), ("status",)):
         cmd += ["--profile", "tiny"]
-    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout,
-                          env={**os.environ, **(env or {})})
+    return subprocess.run(
+        cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout, env={**os.environ, **(env or {})}
+    )
 
 
 def popen(store: Path, *args: str, env: dict | None = None, prompt: str = PROMPT, **kw) -> subprocess.Popen:
@@ -30,10 +43,27 @@ def popen(store: Path, *args: str, env: dict | None = None, prompt: str = PROMPT
     start with a command other than run (``"gc", "--yes"``) start that command instead."""
     head = ["run", prompt] if not args or args[0].startswith("-") else [args[0]]
     args = args if not args or args[0].startswith("-") else args[1:]
-    cmd = [sys.executable, "-m", "holoflow", *head, "--pipeline", str(ROOT / "pipeline.yaml"),
-           "--store", str(store), *(["--profile", "tiny"] if head[0] == "run" else []), *args]
-    return subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, **(env or {})}, **kw)
+    cmd = [
+        sys.executable,
+        "-m",
+        "holoflow",
+        *head,
+        "--pipeline",
+        str(ROOT / "pipeline.yaml"),
+        "--store",
+        str(store),
+        *(["--profile", "tiny"] if head[0] == "run" else []),
+        *args,
+    ]
+    return subprocess.Popen(
+        cmd,
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, **(env or {})},
+        **kw,
+    )
 
 
 def run_json(store: Path, *args: str, **kw) -> dict:
@@ -44,8 +74,10 @@ def run_json(store: Path, *args: str, **kw) -> dict:
 
 def final_bytes(summary: dict) -> dict[str, dict[str, str]]:
     """stage -> {output file: digest} of a run summary (--json) or a run.json."""
-    return {n: {k: (v["digest"] if isinstance(v, dict) else v) for k, v in s["outputs"].items()}
-            for n, s in summary["stages"].items()}
+    return {
+        n: {k: (v["digest"] if isinstance(v, dict) else v) for k, v in s["outputs"].items()}
+        for n, s in summary["stages"].items()
+    }
 
 
 def without_tail(ref: Path, dest: Path, drop: tuple[str, ...] = (TAIL,)) -> Path:
@@ -96,8 +128,11 @@ def descendants(pid: int) -> list[tuple[int, str]]:
             fields = stat.read_text().rsplit(")", 1)[1].split()
             p = int(stat.parent.name)
             kids.setdefault(int(fields[1]), []).append(p)
-            names[p] = (stat.parent / "comm").read_text().strip() + " " + \
-                (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            names[p] = (
+                (stat.parent / "comm").read_text().strip()
+                + " "
+                + (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            )
         except (OSError, IndexError, ValueError):
             pass
     out, todo = [], [pid]

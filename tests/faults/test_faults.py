@@ -7,6 +7,7 @@ clear `holoflow:` line and no traceback, that `holoflow verify` is clean afterwa
 next `holoflow run` completes with the reference's bytes for all thirteen stages (the same machine
 and code: every stage is deterministic for a fixed seed here, and export only re-encodes its inputs).
 """
+
 import json
 import os
 import resource
@@ -47,7 +48,7 @@ def _nothing_lost(store: Path, reference) -> None:
     """Every record of the store copied from the reference is still there with intact objects."""
     ref_keys = {p.name for p in (reference[0] / "keys").glob("*.json")}
     have = {p.name for p in (store / "keys").glob("*.json")}
-    assert have <= ref_keys and len(ref_keys - have) <= 1     # at most the tail's record is missing
+    assert have <= ref_keys and len(ref_keys - have) <= 1  # at most the tail's record is missing
 
 
 @pytest.fixture
@@ -57,8 +58,9 @@ def mount(tmp_path):
     point.mkdir()
 
     def do(size: str) -> Path:
-        done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(point)],
-                              capture_output=True, text=True)
+        done = subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(point)], capture_output=True, text=True
+        )
         if done.returncode != 0:
             pytest.skip(f"cannot mount a tmpfs here (needs root): {done.stderr.strip()}")
         return point
@@ -120,14 +122,14 @@ def test_store_turns_read_only(reference, mount, when):
         # over itself turns every new open read-only at once, as a kernel's errors=remount-ro would
         proc = popen(store)
         step = wait_for_step(proc, TAIL)
-        os.kill(step, signal.SIGSTOP)             # hold the step mid-way while the disk turns read-only
+        os.kill(step, signal.SIGSTOP)  # hold the step mid-way while the disk turns read-only
         subprocess.run(["mount", "--bind", str(point), str(point)], check=True)
         try:
             _remount(point, "bind,ro")
             os.kill(step, signal.SIGCONT)
             out, err = proc.communicate(timeout=120)
         finally:
-            subprocess.run(["umount", str(point)], check=True)      # the bind mount: writable again
+            subprocess.run(["umount", str(point)], check=True)  # the bind mount: writable again
         assert proc.returncode == 1, err
         one_clear_line(err, "read-only")
     _nothing_lost(store, reference)
@@ -172,7 +174,7 @@ def test_run_signalled_mid_step(reference, tmp_path, sig):
     store = without_tail(reference[0], tmp_path / "store")
     proc = popen(store)
     step = wait_for_step(proc, TAIL)
-    os.kill(step, signal.SIGSTOP)                 # the step is surely mid-way when the signal comes
+    os.kill(step, signal.SIGSTOP)  # the step is surely mid-way when the signal comes
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
@@ -204,7 +206,7 @@ def test_truncated_object(reference, tmp_path):
     outputs = reference[1]["stages"][TAIL]["outputs"]
     name, digest = max(outputs.items(), key=lambda kv: (store / "objects" / kv[1][:2] / kv[1]).stat().st_size)
     obj = store / "objects" / digest[:2] / digest
-    with open(obj, "r+b") as f:                   # root writes through the 0444 mode, as a bad disk would
+    with open(obj, "r+b") as f:  # root writes through the 0444 mode, as a bad disk would
         f.truncate(obj.stat().st_size // 2)
     done = holoflow(store, "verify")
     assert done.returncode == 1 and f"corrupt object {digest}" in done.stdout
@@ -216,13 +218,13 @@ def test_truncated_object(reference, tmp_path):
 
 def test_gc_during_run(reference, tmp_path):
     store = without_tail(reference[0], tmp_path / "store")
-    run_json(store, "--until", "detail")          # an older run (all cached) for gc to delete
+    run_json(store, "--until", "detail")  # an older run (all cached) for gc to delete
     proc = popen(store)
     step = wait_for_step(proc, TAIL)
     os.kill(step, signal.SIGSTOP)
     gc = popen(store, "gc", "--yes")
     time.sleep(1.0)
-    assert gc.poll() is None                      # gc waits for the run's lock
+    assert gc.poll() is None  # gc waits for the run's lock
     os.kill(step, signal.SIGCONT)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err

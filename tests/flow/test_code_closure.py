@@ -1,4 +1,5 @@
 """The code part of a cache key is the step program's import closure inside the project."""
+
 import shutil
 from pathlib import Path
 
@@ -23,32 +24,47 @@ def _closure(root: Path, program: str) -> set[str]:
 
 
 def test_closure_follows_every_import_form(tmp_path):
-    _write(tmp_path, {
-        "prog.py": "import pkg.mod\nfrom pkg import sub\nif TYPE_CHECKING:\n    import other\n\n"
-                   "def main():\n    from lazy import thing\n",
-        "pkg/__init__.py": "",
-        "pkg/mod.py": "from . import rel\nfrom .deep.leaf import f\nimport numpy\n",
-        "pkg/rel.py": "X = 1\n",
-        "pkg/deep/__init__.py": "",
-        "pkg/deep/leaf.py": "from .. import mod\n\ndef f():\n    pass\n",
-        "pkg/sub.py": "",
-        "pkg/unused.py": "",
-        "lazy/__init__.py": "def __getattr__(name):\n    import importlib\n    return importlib.import_module(name)\n",
-        "lazy/a.py": "",
-        "lazy/b/__init__.py": "",
-        "other.py": "",
-    })
+    _write(
+        tmp_path,
+        {
+            "prog.py": "import pkg.mod\nfrom pkg import sub\nif TYPE_CHECKING:\n    import other\n\n"
+            "def main():\n    from lazy import thing\n",
+            "pkg/__init__.py": "",
+            "pkg/mod.py": "from . import rel\nfrom .deep.leaf import f\nimport numpy\n",
+            "pkg/rel.py": "X = 1\n",
+            "pkg/deep/__init__.py": "",
+            "pkg/deep/leaf.py": "from .. import mod\n\ndef f():\n    pass\n",
+            "pkg/sub.py": "",
+            "pkg/unused.py": "",
+            "lazy/__init__.py": "def __getattr__(name):\n    import importlib\n    return importlib.import_module(name)\n",
+            "lazy/a.py": "",
+            "lazy/b/__init__.py": "",
+            "other.py": "",
+        },
+    )
     assert _closure(tmp_path, "prog.py") == {
-        "prog.py", "pkg/__init__.py", "pkg/mod.py", "pkg/rel.py", "pkg/deep/__init__.py", "pkg/deep/leaf.py",
-        "pkg/sub.py", "lazy/__init__.py", "lazy/a.py", "lazy/b/__init__.py"}
+        "prog.py",
+        "pkg/__init__.py",
+        "pkg/mod.py",
+        "pkg/rel.py",
+        "pkg/deep/__init__.py",
+        "pkg/deep/leaf.py",
+        "pkg/sub.py",
+        "lazy/__init__.py",
+        "lazy/a.py",
+        "lazy/b/__init__.py",
+    }
 
 
 def test_closure_terminates_on_a_cycle_and_reads_namespace_folders(tmp_path):
-    _write(tmp_path, {
-        "prog.py": "from tools import a\n",
-        "tools/a.py": "from . import b\n",            # tools/ has no __init__.py: a namespace package
-        "tools/b.py": "from tools import a\nimport tools.b\n",
-    })
+    _write(
+        tmp_path,
+        {
+            "prog.py": "from tools import a\n",
+            "tools/a.py": "from . import b\n",  # tools/ has no __init__.py: a namespace package
+            "tools/b.py": "from tools import a\nimport tools.b\n",
+        },
+    )
     assert _closure(tmp_path, "prog.py") == {"prog.py", "tools/a.py", "tools/b.py"}
 
 
@@ -86,12 +102,15 @@ def _edit(path: Path, extra: str) -> str:
     return before
 
 
-@pytest.mark.parametrize("module, stale", [
-    ("holoflow/quality/metrics.py", {"pre_opt", "inp_set", "transfer_opt"}),
-    ("holoflow/stage.py", "all"),
-    ("holoflow/networks/zoedepth.py", {"tangent_depth", "metric_align"}),
-    ("holoflow/bench/cache.py", set()),
-])
+@pytest.mark.parametrize(
+    "module, stale",
+    [
+        ("holoflow/quality/metrics.py", {"pre_opt", "inp_set", "transfer_opt"}),
+        ("holoflow/stage.py", "all"),
+        ("holoflow/networks/zoedepth.py", {"tangent_depth", "metric_align"}),
+        ("holoflow/bench/cache.py", set()),
+    ],
+)
 def test_editing_an_imported_module_makes_exactly_its_importers_stale(real_tree, module, stale):
     before = _components(real_tree)
     path = real_tree / module
@@ -121,9 +140,13 @@ def test_status_names_a_function_level_import(project, capsys):
 
 
 def test_entry_point_strings_count_as_imports(tmp_path):
-    _write(tmp_path, {
-        "prog.py": "from reg import ENGINES\n",
-        "reg.py": 'ENGINES = {"fast": "impl.fast:run", "doc": "not an import: a.b c"}\n',
-        "impl/__init__.py": "", "impl/fast.py": "def run(): pass\n",
-    })
+    _write(
+        tmp_path,
+        {
+            "prog.py": "from reg import ENGINES\n",
+            "reg.py": 'ENGINES = {"fast": "impl.fast:run", "doc": "not an import: a.b c"}\n',
+            "impl/__init__.py": "",
+            "impl/fast.py": "def run(): pass\n",
+        },
+    )
     assert _closure(tmp_path, "prog.py") == {"prog.py", "reg.py", "impl/__init__.py", "impl/fast.py"}

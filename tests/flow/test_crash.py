@@ -1,4 +1,5 @@
 """SIGKILL of a step or of the runner, concurrent runs, corrupted objects: the store stays consistent."""
+
 import hashlib
 import json
 import os
@@ -103,7 +104,7 @@ def test_killed_runner_mid_step(project, capsys, launch):
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=10)
     for pid in others:
-        _wait_dead(pid)                         # the step dies with its runner (no orphan)
+        _wait_dead(pid)  # the step dies with its runner (no orphan)
     _consistent(project.store)
     _verify_ok(project, capsys)
     s = project.run_json(capsys=capsys)
@@ -120,7 +121,7 @@ def test_killed_template_mid_step(project, capsys):
     os.kill(template[0], signal.SIGKILL)
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 1 and "stage 'upper' failed (killed by signal 9 (its warm template died))" in err
-    _wait_dead(step)                            # no orphan: the step died with its template
+    _wait_dead(step)  # no orphan: the step died with its template
     _consistent(project.store)
     _verify_ok(project, capsys)
     assert list((project.store / "tmp").iterdir()) == []
@@ -200,7 +201,7 @@ def test_verify_finds_corruption_hidden_from_stat(project, capsys):
     data[0] ^= 1
     os.chmod(obj, 0o644)
     obj.write_bytes(bytes(data))
-    os.utime(obj, ns=(st.st_atime_ns, st.st_mtime_ns))      # same size, same mtime
+    os.utime(obj, ns=(st.st_atime_ns, st.st_mtime_ns))  # same size, same mtime
     rc, out, _ = project.cli("verify", capsys=capsys)
     assert rc == 1 and f"corrupt object {digest}" in out
     s = project.run_json(capsys=capsys)

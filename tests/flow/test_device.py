@@ -1,5 +1,6 @@
 """The run's device and profile lists: `--profile a,b` merge order, a profile's `device:`, the precedence
 --device > $HOLOFLOW_DEVICE > profile > cpu, splat engine `auto`, and the `--models` manifest."""
+
 import json
 from pathlib import Path
 
@@ -18,11 +19,11 @@ def real():
 
 def test_profile_list_applies_in_order(real):
     both = pipeline.resolve(real, "paper,tiny")
-    assert both["base_pano"].engine == "diffusion360"                    # from paper, tiny names no engine
-    assert both["base_pano"].params["width"] == 128                      # tiny's size wins over paper's
+    assert both["base_pano"].engine == "diffusion360"  # from paper, tiny names no engine
+    assert both["base_pano"].params["width"] == 128  # tiny's size wins over paper's
     assert both["pre_opt"].params["pcd_iters"] == 10 and both["pre_opt"].params["init_opacity"] == 0.1
     assert both["base_pano"].overrides["width"] == "profile tiny"
-    assert both["base_pano"].resources.gpus == 1                         # paper's key, tiny names none
+    assert both["base_pano"].resources.gpus == 1  # paper's key, tiny names none
     rev = pipeline.resolve(real, "tiny,paper")
     assert rev["base_pano"].params["width"] == 1024
     with pytest.raises(pipeline.PipelineError, match="unknown profile 'papr'.*did you mean 'paper'"):
@@ -36,14 +37,17 @@ def test_profile_device(real):
     assert pipeline.profile_device(real, None) is None
 
 
-@pytest.mark.parametrize("flag, env, profile, cuda, want", [
-    (None, None, "tiny", False, "cpu"),
-    (None, None, "paper", False, "cpu"),          # auto without a driver
-    (None, None, "paper", True, "cuda"),          # auto with one
-    ("cpu", None, "paper", True, "cpu"),          # --device wins over the profile
-    (None, "cpu", "paper", True, "cpu"),          # so does $HOLOFLOW_DEVICE
-    ("cuda", None, "tiny", False, "cuda"),        # explicit cuda is left to the steps
-])
+@pytest.mark.parametrize(
+    "flag, env, profile, cuda, want",
+    [
+        (None, None, "tiny", False, "cpu"),
+        (None, None, "paper", False, "cpu"),  # auto without a driver
+        (None, None, "paper", True, "cuda"),  # auto with one
+        ("cpu", None, "paper", True, "cpu"),  # --device wins over the profile
+        (None, "cpu", "paper", True, "cpu"),  # so does $HOLOFLOW_DEVICE
+        ("cuda", None, "tiny", False, "cuda"),  # explicit cuda is left to the steps
+    ],
+)
 def test_run_device_precedence(real, monkeypatch, flag, env, profile, cuda, want):
     monkeypatch.setattr(context, "cuda_present", lambda: cuda)
     monkeypatch.delenv("HOLOFLOW_DEVICE", raising=False)
@@ -66,7 +70,7 @@ def test_splat_engine_auto(real, device, want):
     r = pipeline.resolve(real, "paper")
     context.resolve_device_engines(r, device)
     assert r["pre_opt"].engine == r["transfer_opt"].engine == want
-    assert r["inp_set"].engine == "lama"                                 # not a splat engine: untouched
+    assert r["inp_set"].engine == "lama"  # not a splat engine: untouched
 
 
 def test_bad_profile_device_is_refused(tmp_path):
@@ -79,25 +83,29 @@ def test_bad_profile_device_is_refused(tmp_path):
 def test_models_manifest_fills_empty_model_params(real, tmp_path):
     (tmp_path / "sd").mkdir()
     (tmp_path / "lama.safetensors").write_bytes(b"x")
-    (tmp_path / "manifest.json").write_text(json.dumps({"format": 1, "roles": {
-        "diffusion360": "sd", "lama": "lama.safetensors"}}))
+    (tmp_path / "manifest.json").write_text(
+        json.dumps({"format": 1, "roles": {"diffusion360": "sd", "lama": "lama.safetensors"}})
+    )
     assert read_manifest(tmp_path)["lama"] == (tmp_path / "lama.safetensors").resolve()
     r = pipeline.resolve(real, "paper", ["inp_set.model=/mine/lama.safetensors"])
     only = {k: r[k] for k in ("base_pano", "inp_set")}
     apply_manifest(only, tmp_path)
     assert r["base_pano"].params["model"] == str((tmp_path / "sd").resolve())
-    assert r["inp_set"].params["model"] == "/mine/lama.safetensors"      # a given param keeps its value
+    assert r["inp_set"].params["model"] == "/mine/lama.safetensors"  # a given param keeps its value
     with pytest.raises(pipeline.PipelineError, match="no 'sd15'.*stylize.model"):
         apply_manifest({"stylize": r["stylize"]}, tmp_path)
 
 
-@pytest.mark.parametrize("doc, match", [
-    (None, "no manifest.json"),
-    ("{", "not JSON"),
-    ('{"format": 2, "roles": {}}', "needs"),
-    ('{"format": 1, "roles": {"sdxl": "x"}}', "unknown role 'sdxl'"),
-    ('{"format": 1, "roles": {"lama": "nope.pth"}}', "does not exist"),
-])
+@pytest.mark.parametrize(
+    "doc, match",
+    [
+        (None, "no manifest.json"),
+        ("{", "not JSON"),
+        ('{"format": 2, "roles": {}}', "needs"),
+        ('{"format": 1, "roles": {"sdxl": "x"}}', "unknown role 'sdxl'"),
+        ('{"format": 1, "roles": {"lama": "nope.pth"}}', "does not exist"),
+    ],
+)
 def test_bad_manifest_is_one_line(tmp_path, doc, match):
     if doc is not None:
         (tmp_path / "manifest.json").write_text(doc)

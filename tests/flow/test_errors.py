@@ -1,4 +1,5 @@
 """User mistakes: each ends with one clear line naming the file/stage and the fix, exit code 2."""
+
 import os
 from pathlib import Path
 
@@ -12,6 +13,7 @@ def _mutate(fn):
     def apply(doc):
         fn(doc)
         return doc
+
     return apply
 
 
@@ -23,39 +25,69 @@ BROKEN = [  # (id, mutation of the parsed toy pipeline or raw text, expected wor
     ("seed-string", _mutate(lambda d: d.update(seed="x")), "set `seed:` to an integer"),
     ("no-stages", _mutate(lambda d: d.pop("stages")), "no `stages:` mapping"),
     ("stage-scalar", _mutate(lambda d: d["stages"].update(gen="gen.py")), "stage 'gen': block is a string"),
-    ("unknown-stage-key", _mutate(lambda d: d["stages"]["upper"].update(parms={})),
-     "stage 'upper': unknown key 'parms'"),
+    (
+        "unknown-stage-key",
+        _mutate(lambda d: d["stages"]["upper"].update(parms={})),
+        "stage 'upper': unknown key 'parms'",
+    ),
     ("missing-run", _mutate(lambda d: d["stages"]["upper"].pop("run")), "stage 'upper': missing `run:`"),
-    ("engine-not-listed", _mutate(lambda d: d["stages"]["gen"].update(engine="turbo")),
-     "engine 'turbo' is not in engines"),
-    ("engines-not-list", _mutate(lambda d: d["stages"]["gen"].update(engines="basic")),
-     "`engines:` is not a list"),
-    ("input-unknown-stage", _mutate(lambda d: d["stages"]["upper"].update(inputs={"src": "gne"})),
-     "input 'src' names unknown stage 'gne'; fix: name one of: gen, upper, join (did you mean 'gen'?)"),
-    ("input-self", _mutate(lambda d: d["stages"]["upper"].update(inputs={"src": "upper"})),
-     "names the stage itself"),
+    (
+        "engine-not-listed",
+        _mutate(lambda d: d["stages"]["gen"].update(engine="turbo")),
+        "engine 'turbo' is not in engines",
+    ),
+    ("engines-not-list", _mutate(lambda d: d["stages"]["gen"].update(engines="basic")), "`engines:` is not a list"),
+    (
+        "input-unknown-stage",
+        _mutate(lambda d: d["stages"]["upper"].update(inputs={"src": "gne"})),
+        "input 'src' names unknown stage 'gne'; fix: name one of: gen, upper, join (did you mean 'gen'?)",
+    ),
+    ("input-self", _mutate(lambda d: d["stages"]["upper"].update(inputs={"src": "upper"})), "names the stage itself"),
     ("cycle", _mutate(lambda d: d["stages"]["gen"].update(inputs={"x": "join"})), "inputs form a cycle"),
-    ("inputs-list", _mutate(lambda d: d["stages"]["upper"].update(inputs=["gen"])),
-     "`inputs:` is not a mapping"),
+    ("inputs-list", _mutate(lambda d: d["stages"]["upper"].update(inputs=["gen"])), "`inputs:` is not a mapping"),
     ("prompt-string", _mutate(lambda d: d["stages"]["gen"].update(prompt="yes")), "`prompt:` is 'yes'"),
     ("params-list", _mutate(lambda d: d["stages"]["gen"].update(params=[1])), "`params:` is a list"),
     ("bad-stage-name", _mutate(lambda d: d["stages"].update({"2nd": {"run": "gen.py"}})), "invalid stage name"),
-    ("profile-unknown-stage", _mutate(lambda d: d["profiles"]["small"].update(gne={"n": 1})),
-     "profile 'small' names unknown stage 'gne'"),
-    ("profile-unknown-param", _mutate(lambda d: d["profiles"]["small"]["gen"].update(m=1)),
-     "profile 'small' sets unknown param 'm'"),
-    ("profile-wrong-type", _mutate(lambda d: d["profiles"]["small"]["gen"].update(n="three")),
-     "profile 'small' sets n='three' (a string), but the default 3 is an integer"),
-    ("profile-bad-engine", _mutate(lambda d: d["profiles"]["small"]["gen"].update(engine="x")),
-     "profile 'small' sets engine 'x'"),
-    ("default-profile-unknown", _mutate(lambda d: d.update(default_profile="huge")),
-     "default_profile 'huge' is not a profile"),
-    ("program-missing", _mutate(lambda d: d["stages"]["upper"].update(run="nope.py")),
-     "stage 'upper': program 'nope.py' does not exist"),
-    ("code-path-missing", _mutate(lambda d: d["stages"]["gen"].update(code=["libs"])),
-     "stage 'gen': code path 'libs' does not exist"),
-    ("program-not-executable", _mutate(lambda d: d["stages"]["upper"].update(run="lib/helpers.txt")),
-     "is not executable"),
+    (
+        "profile-unknown-stage",
+        _mutate(lambda d: d["profiles"]["small"].update(gne={"n": 1})),
+        "profile 'small' names unknown stage 'gne'",
+    ),
+    (
+        "profile-unknown-param",
+        _mutate(lambda d: d["profiles"]["small"]["gen"].update(m=1)),
+        "profile 'small' sets unknown param 'm'",
+    ),
+    (
+        "profile-wrong-type",
+        _mutate(lambda d: d["profiles"]["small"]["gen"].update(n="three")),
+        "profile 'small' sets n='three' (a string), but the default 3 is an integer",
+    ),
+    (
+        "profile-bad-engine",
+        _mutate(lambda d: d["profiles"]["small"]["gen"].update(engine="x")),
+        "profile 'small' sets engine 'x'",
+    ),
+    (
+        "default-profile-unknown",
+        _mutate(lambda d: d.update(default_profile="huge")),
+        "default_profile 'huge' is not a profile",
+    ),
+    (
+        "program-missing",
+        _mutate(lambda d: d["stages"]["upper"].update(run="nope.py")),
+        "stage 'upper': program 'nope.py' does not exist",
+    ),
+    (
+        "code-path-missing",
+        _mutate(lambda d: d["stages"]["gen"].update(code=["libs"])),
+        "stage 'gen': code path 'libs' does not exist",
+    ),
+    (
+        "program-not-executable",
+        _mutate(lambda d: d["stages"]["upper"].update(run="lib/helpers.txt")),
+        "is not executable",
+    ),
 ]
 
 FLAGS = [  # (id, extra argv, expected words)
@@ -97,7 +129,7 @@ def _one_clear_line(project, capsys, argv, expected):
     assert rc == 2, err
     assert len(lines) == 1 and lines[0].startswith("holoflow: error: "), err
     assert expected in lines[0] and "fix:" in lines[0], lines[0]
-    assert not (project.store / "objects").exists()      # nothing was run or written
+    assert not (project.store / "objects").exists()  # nothing was run or written
 
 
 def test_missing_pipeline_file(tmp_path, capsys, monkeypatch):
@@ -131,12 +163,15 @@ def test_fixture_pipeline_is_valid():
     assert list(p.stages) == ["gen", "upper", "join"]
 
 
-@pytest.mark.parametrize("tail, words", [
-    ("MemoryError: Unable to allocate 512. MiB", "out of memory"),
-    ("RuntimeError: can't start new thread", "out of memory or of threads"),
-    ("OSError: [Errno 28] No space left on device", "a disk is full"),
-    ("ValueError: bad shape", None),
-])
+@pytest.mark.parametrize(
+    "tail, words",
+    [
+        ("MemoryError: Unable to allocate 512. MiB", "out of memory"),
+        ("RuntimeError: can't start new thread", "out of memory or of threads"),
+        ("OSError: [Errno 28] No space left on device", "a disk is full"),
+        ("ValueError: bad shape", None),
+    ],
+)
 def test_exit_reason_reads_the_log_tail(tail, words):
     # a step's exit code alone says nothing of why; the words come from what its log says
     from holoflow.flow.executors.failure import exit_reason

@@ -1,4 +1,5 @@
 """pipeline.yaml resolution: profiles, --set typing, DAG order; cache-key reasons; the real pipeline loads."""
+
 from pathlib import Path
 
 import pytest
@@ -15,17 +16,20 @@ def test_profile_then_set_precedence():
     r = pipeline.resolve(p, "big", ["gen.n=7"])
     assert r["gen"].engine == "fancy" and r["gen"].params["n"] == 7
     assert r["gen"].overrides == {"n": "--set", "engine": "profile big"}
-    assert pipeline.resolve(p)["gen"].params["n"] == 2          # default_profile small
+    assert pipeline.resolve(p)["gen"].params["n"] == 2  # default_profile small
 
 
-@pytest.mark.parametrize("item, key, value", [
-    ("upper.scale=1", "scale", 1.0),           # int accepted for a float param, stored as float
-    ("upper.mode=123", "mode", "123"),         # a string param keeps the text
-    ("upper.mode=", "mode", ""),
-    ("upper.mode=null", "mode", "null"),
-    ("gen.fail=true", "fail", True),
-    ("upper.sleep=2.5e-1", "sleep", 0.25),
-])
+@pytest.mark.parametrize(
+    "item, key, value",
+    [
+        ("upper.scale=1", "scale", 1.0),  # int accepted for a float param, stored as float
+        ("upper.mode=123", "mode", "123"),  # a string param keeps the text
+        ("upper.mode=", "mode", ""),
+        ("upper.mode=null", "mode", "null"),
+        ("gen.fail=true", "fail", True),
+        ("upper.sleep=2.5e-1", "sleep", 0.25),
+    ],
+)
 def test_set_typing(item, key, value):
     p = pipeline.load(FIXTURES / "pipeline.yaml")
     stage = item.split(".")[0]
@@ -52,12 +56,30 @@ def test_python_digest_ignores_comments_not_code():
 
 
 def test_reasons_in_words():
-    old = components("detail", {"a.py": "1"}, "classical", {"strength": 0.5}, {"pano": {"stage": "upscale",
-                     "tree": "t1"}}, 0, "cabin")
-    new = components("detail", {"a.py": "2"}, "controlnet_tile", {"strength": 0.7},
-                     {"pano": {"stage": "upscale", "tree": "t2"}}, 1, "temple")
+    old = components(
+        "detail",
+        {"a.py": "1"},
+        "classical",
+        {"strength": 0.5},
+        {"pano": {"stage": "upscale", "tree": "t1"}},
+        0,
+        "cabin",
+    )
+    new = components(
+        "detail",
+        {"a.py": "2"},
+        "controlnet_tile",
+        {"strength": 0.7},
+        {"pano": {"stage": "upscale", "tree": "t2"}},
+        1,
+        "temple",
+    )
     assert cache_key(old) != cache_key(new) and cache_key(old) == cache_key(dict(old))
-    assert reasons(old, new) == ["engine changed: classical -> controlnet_tile",
-                                 "params changed: detail.strength 0.5 -> 0.7", "code changed: a.py",
-                                 "input changed: upscale", "seed changed: 0 -> 1",
-                                 'prompt changed: "cabin" -> "temple"']
+    assert reasons(old, new) == [
+        "engine changed: classical -> controlnet_tile",
+        "params changed: detail.strength 0.5 -> 0.7",
+        "code changed: a.py",
+        "input changed: upscale",
+        "seed changed: 0 -> 1",
+        'prompt changed: "cabin" -> "temple"',
+    ]

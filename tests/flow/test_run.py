@@ -1,4 +1,5 @@
 """Run, cache, early cutoff, --force, --set and back, selection flags, status reasons, failures."""
+
 import json
 import os
 import stat
@@ -11,9 +12,9 @@ def test_run_then_cached_then_status(project, capsys):
     assert link.read_text().startswith("A CABIN 0 SEED=7")
     assert not os.access(os.path.realpath(link), os.W_OK) or os.getuid() == 0
     assert stat.S_IMODE(os.stat(link).st_mode) == 0o444
-    s2 = project.run_json(capsys=capsys)               # prompt defaults to the last run's
+    s2 = project.run_json(capsys=capsys)  # prompt defaults to the last run's
     assert project.how(s2) == {"gen": "cached", "upper": "cached", "join": "cached"}
-    assert s2["run"] == s["run"]                       # nothing changed: no new run
+    assert s2["run"] == s["run"]  # nothing changed: no new run
     rc, out, _ = project.cli("status", capsys=capsys)
     assert rc == 0 and all(line.split()[1] == "fresh" for line in out.strip().splitlines())
 
@@ -28,9 +29,15 @@ def test_record_has_provenance(project, capsys):
     log = (project.store / "objects" / prov["log"][:2] / prov["log"]).read_text()
     assert "@progress" in log
     # the program, what it imports (holoflow/stage.py and its package), and its `code:` folder
-    assert rec["components"]["code"].keys() == {"gen.py", "holoflow/__init__.py", "holoflow/stage.py",
-                                                "lib/helpers.py", "holoflow/io/__init__.py",
-                                                "holoflow/io/validate.py", "holoflow/io/exr.py"}
+    assert rec["components"]["code"].keys() == {
+        "gen.py",
+        "holoflow/__init__.py",
+        "holoflow/stage.py",
+        "lib/helpers.py",
+        "holoflow/io/__init__.py",
+        "holoflow/io/validate.py",
+        "holoflow/io/exr.py",
+    }
 
 
 def test_force_reruns_one_step_and_cutoff_keeps_downstream(project, capsys):
@@ -66,8 +73,11 @@ def test_status_reasons(project, capsys):
     rc, out, _ = project.cli("status", "--json", "--set", "upper.mode=title", capsys=capsys)
     st = json.loads(out)["stages"]
     assert st["gen"]["state"] == "fresh"
-    assert st["upper"] == {"state": "stale", "key": st["upper"]["key"],
-                           "reasons": ['params changed: upper.mode "upper" -> "title"']}
+    assert st["upper"] == {
+        "state": "stale",
+        "key": st["upper"]["key"],
+        "reasons": ['params changed: upper.mode "upper" -> "title"'],
+    }
     assert st["join"]["state"] == "stale" and st["join"]["reasons"] == ["upstream not fresh: upper"]
     rc, out, _ = project.cli("status", "--profile", "big", capsys=capsys)
     assert "engine changed: basic -> fancy" in out and "params changed: gen.n 2 -> 5" in out
@@ -110,13 +120,14 @@ def test_failed_step_commits_nothing_and_keeps_earlier(project, capsys):
 
 
 def test_non_python_program(project, capsys):
-    (project.root / "pipeline.yaml").write_text((project.root / "pipeline.yaml").read_text().replace(
-        "profiles:", "  shout:\n    run: shout.sh\nprofiles:"))
+    (project.root / "pipeline.yaml").write_text(
+        (project.root / "pipeline.yaml").read_text().replace("profiles:", "  shout:\n    run: shout.sh\nprofiles:")
+    )
     s = project.run_json("p", capsys=capsys)
     assert s["stages"]["shout"]["how"] == "ran"
     assert (project.store / "latest" / "shout" / "hello.txt").read_text() == "hello\n"
     launch = {n: project.store_record(s, n)["provenance"]["launch"] for n in ("gen", "shout")}
-    assert launch == {"gen": "warm", "shout": "cold"}       # a non-Python program is always exec'd
+    assert launch == {"gen": "warm", "shout": "cold"}  # a non-Python program is always exec'd
 
 
 def test_cold_flag_and_env_exec_every_step(project, capsys, monkeypatch):
@@ -142,11 +153,18 @@ def test_cached_run_and_status_import_nothing_heavy(project, capsys):
 
     project.run_json("p", capsys=capsys)
     for cmd in (["run"], ["status"]):
-        r = subprocess.run([sys.executable, "-X", "importtime", "-m", "holoflow", *cmd], cwd=project.root,
-                           capture_output=True, text=True)
+        r = subprocess.run(
+            [sys.executable, "-X", "importtime", "-m", "holoflow", *cmd],
+            cwd=project.root,
+            capture_output=True,
+            text=True,
+        )
         assert r.returncode == 0, r.stderr
-        imported = {line.split("|")[-1].strip().split(".")[0] for line in r.stderr.splitlines()
-                    if line.startswith("import time:")}
+        imported = {
+            line.split("|")[-1].strip().split(".")[0]
+            for line in r.stderr.splitlines()
+            if line.startswith("import time:")
+        }
         assert not imported & {"torch", "numpy", "rich", "OpenImageIO", "OpenEXR", "subprocess"}, cmd
 
 
@@ -162,10 +180,11 @@ def test_warm_templates_are_started_for_every_step_at_the_first_submit(project, 
 
     calls = []
     real = LocalExecutor.expect
-    monkeypatch.setattr(LocalExecutor, "expect",
-                        lambda self, needs, ahead=(): (calls.append(needs), real(self, needs, ahead))[1])
+    monkeypatch.setattr(
+        LocalExecutor, "expect", lambda self, needs, ahead=(): (calls.append(needs), real(self, needs, ahead))[1]
+    )
     project.run_json("p", capsys=capsys)
-    assert len(calls) == 1 and len(calls[0]) == 3               # gen, upper, join: all known at the start
+    assert len(calls) == 1 and len(calls[0]) == 3  # gen, upper, join: all known at the start
 
 
 def test_an_engine_the_step_chose_is_named_by_run_and_status(project, capsys):
@@ -177,4 +196,3 @@ def test_an_engine_the_step_chose_is_named_by_run_and_status(project, capsys):
     rc, out, _ = project.cli("status", "--set", "gen.engine=fancy", capsys=capsys)
     gen = next(ln for ln in out.splitlines() if ln.startswith("gen"))
     assert "engine fancy-v2 (fancy: the toy picks its v2)" in gen
-

@@ -1,6 +1,7 @@
 """No rings at the poles (issue 31): a constant-colour room made into Gaussians by the project's own
 path (point_cloud's P_f sampling, the trainers' initial Gaussians, their default params) and seen
 straight up and straight down at the paper's view size is covered everywhere, in the right colour."""
+
 import math
 
 import numpy as np
@@ -25,7 +26,7 @@ from holoflow.recon.optimize import init_model
 from holoflow.splat import render
 from holoflow.splat.project import EPS2D
 
-COLOUR = (0.6, 0.45, 0.3)                # sRGB, the PLY convention
+COLOUR = (0.6, 0.45, 0.3)  # sRGB, the PLY convention
 
 
 def _room(width: int, sampling: str, cfg: TransferOptParams, pc: PointCloudParams = PointCloudParams()):
@@ -40,16 +41,20 @@ def _room(width: int, sampling: str, cfg: TransferOptParams, pc: PointCloudParam
         xyz, c, _ = equirect_to_area_points(rgb, depth, caps, cap_rgb)
     else:
         xyz, c = equirect_to_points(rgb, depth)
-    low_pass = EPS2D * view_pixel_rad(pc.view_size, pc.view_fov_deg) ** 2   # as recon.schedule.cloud_footprint
+    low_pass = EPS2D * view_pixel_rad(pc.view_size, pc.view_fov_deg) ** 2  # as recon.schedule.cloud_footprint
     footprint = (2 * math.pi / width, cfg.footprint_width, cfg.footprint_thickness, caps, 0, 0.0, low_pass)
-    return init_model(xyz.numpy(), (c.numpy() * 255 + 0.5).astype(np.uint8), cfg.init_opacity,
-                      footprint=footprint if cfg.init_scale == "footprint" else None)
+    return init_model(
+        xyz.numpy(),
+        (c.numpy() * 255 + 0.5).astype(np.uint8),
+        cfg.init_opacity,
+        footprint=footprint if cfg.init_scale == "footprint" else None,
+    )
 
 
 def _poles(model, size: int = 512, side: bool = False):
     """(rgb, alpha) of the views straight down and straight up (and, ``side``, the 36 other base views)."""
     rig = base_rig(38)
-    vm = rig[[0, -1, *range(1, 37)]] if side else rig[[0, -1]]             # down, up (, the others)
+    vm = rig[[0, -1, *range(1, 37)]] if side else rig[[0, -1]]  # down, up (, the others)
     K = intrinsics_from_fov(47.43, size, size).expand(len(vm), 3, 3)
     with torch.no_grad():
         out = render(model, vm.float(), K.float(), size, size, backend="cpu", depth=False)
@@ -66,13 +71,14 @@ def test_zenith_and_nadir_have_no_rings():
     cfg = TransferOptParams()
     model = _room(512, PointCloudParams().pf_sampling, cfg)
     rgb, alpha = _poles(model, side=True)
-    cover = alpha.flatten(1).min(1).values                            # [38] worst pixel per view
+    cover = alpha.flatten(1).min(1).values  # [38] worst pixel per view
     assert float(cover.min()) > 0.95, cover
     rig = base_rig(38).float()
     K = intrinsics_from_fov(47.43, 256, 256).float()
     views = [dict(image=torch.tensor(COLOUR).expand(256, 256, 3), viewmat=v, K=K, mask=None) for v in rig]
-    fit_colours(model, views, cfg.fit_iters, weights=polar_weights(views, cfg.fit_polar_weight),
-                max_colour=cfg.fit_max_colour)
+    fit_colours(
+        model, views, cfg.fit_iters, weights=polar_weights(views, cfg.fit_polar_weight), max_colour=cfg.fit_max_colour
+    )
     rgb, _ = _poles(model, side=True)
     err = (rgb - torch.tensor(COLOUR)).abs().flatten(1).max(1).values  # [38] worst pixel per view
     assert float(err.max()) < 0.02, err
@@ -89,7 +95,7 @@ def test_one_point_per_pixel_leaves_rings():
 def test_area_sampling_counts_and_colours():
     counts = area_counts(256, 512)
     assert int(counts[0]) == round(512 * math.sin(math.pi / 512)) and int(counts[128]) == 512
-    assert abs(int(counts.sum()) / (256 * 512) - 2 / math.pi) < 0.01            # 64 % of the grid
+    assert abs(int(counts.sum()) / (256 * 512) - 2 / math.pi) < 0.01  # 64 % of the grid
     rng = torch.Generator().manual_seed(0)
     rgb = torch.rand(256, 512, 3, generator=rng, dtype=torch.float64)
     dirs, colour, _, _ = area_sample(rgb, torch.ones(256, 512, dtype=torch.float64))
@@ -108,7 +114,7 @@ def test_footprint_discs_face_the_centre(d):
     scales, q = footprint_gaussians(xyz, 0.01, 0.6, 0.1)
     assert torch.allclose(scales, torch.tensor([[0.018, 0.018, 0.003]], dtype=torch.float64))
     R = quat_to_rotmat(q)[0]
-    assert torch.allclose(R[:, 2], xyz[0] / 3.0, atol=1e-12)                  # local z along the ray
+    assert torch.allclose(R[:, 2], xyz[0] / 3.0, atol=1e-12)  # local z along the ray
 
 
 def _ring_texture(width: int) -> torch.Tensor:
@@ -126,22 +132,28 @@ def test_polar_caps_keep_the_detail_of_the_polar_rows():
 
     pf_width, size = 256, 128
     pano = _ring_texture(2 * pf_width)
-    col = torch.nn.functional.avg_pool2d(pano.permute(2, 0, 1)[None], 2)[0].permute(1, 2, 0)   # P_f's grid
+    col = torch.nn.functional.avg_pool2d(pano.permute(2, 0, 1)[None], 2)[0].permute(1, 2, 0)  # P_f's grid
     depth = torch.full((pf_width // 2, pf_width), 2.0, dtype=torch.float64)
     rig = base_rig(38)[[0, -1]]
     K = intrinsics_from_fov(47.43, size, size)
-    want = equirect_to_pinhole(pano.permute(2, 0, 1).float(), K[None].expand(2, 3, 3), rig.float(), size, size,
-                               mode="antialias").permute(0, 2, 3, 1)
+    want = equirect_to_pinhole(
+        pano.permute(2, 0, 1).float(), K[None].expand(2, 3, 3), rig.float(), size, size, mode="antialias"
+    ).permute(0, 2, 3, 1)
     cfg = TransferOptParams()
     psnr = {}
     for density in (1.0, 2.0):
         caps = polar_caps(pf_width, 2 * pf_width, density, 65.0)
         xyz, c, _ = equirect_to_area_points(col, depth, caps, None if caps is None else pano)
-        model = init_model(xyz.numpy(), (c.numpy() * 255 + 0.5).astype(np.uint8), cfg.init_opacity,
-                           footprint=(2 * math.pi / pf_width, cfg.footprint_width, cfg.footprint_thickness, caps))
+        model = init_model(
+            xyz.numpy(),
+            (c.numpy() * 255 + 0.5).astype(np.uint8),
+            cfg.init_opacity,
+            footprint=(2 * math.pi / pf_width, cfg.footprint_width, cfg.footprint_thickness, caps),
+        )
         with torch.no_grad():
-            rgb = render(model, rig.float(), K[None].expand(2, 3, 3).float(), size, size, backend="cpu",
-                         depth=False)["rgb"]
+            rgb = render(model, rig.float(), K[None].expand(2, 3, 3).float(), size, size, backend="cpu", depth=False)[
+                "rgb"
+            ]
         psnr[density] = float(-10 * torch.log10(((rgb - want) ** 2).mean()))
     # measured: 16.3 dB without the caps, 20.4 with (untrained discs low-pass the pattern either way)
     assert psnr[2.0] > psnr[1.0] + 3.0, psnr
@@ -150,8 +162,12 @@ def test_polar_caps_keep_the_detail_of_the_polar_rows():
 def test_polar_caps_meet_pf_without_a_gap():
     """P_f's last row and the caps' first are no further apart than P_f's own rows, at any edge, and the
     split between them lies between the two."""
-    for pf_width, pano_width, density, edge in [(1536, 2048, 2.0, 65.0), (512, 4096, 2.0, 55.0),
-                                               (256, 256, 2.0, 70.0), (1000, 1500, 1.5, 60.3)]:
+    for pf_width, pano_width, density, edge in [
+        (1536, 2048, 2.0, 65.0),
+        (512, 4096, 2.0, 55.0),
+        (256, 256, 2.0, 70.0),
+        (1000, 1500, 1.5, 60.3),
+    ]:
         caps = polar_caps(pf_width, pano_width, density, edge)
         split = math.radians(caps.split_deg)
         lat = torch.pi / 2 - (torch.arange(pf_width // 2) + 0.5) * torch.pi / (pf_width // 2)
@@ -168,11 +184,11 @@ def test_cap_ellipses_are_narrow_along_the_ring():
 
     caps = polar_caps(512, 1024, 2.0, 60.0)
     lon = torch.tensor([0.3, -2.0, 1.0], dtype=torch.float64)
-    lat = torch.tensor([1.2, -1.3, 0.2], dtype=torch.float64)                 # north cap, south cap, P_f
+    lat = torch.tensor([1.2, -1.3, 0.2], dtype=torch.float64)  # north cap, south cap, P_f
     xyz = 3.0 * lonlat_to_direction(lon, lat)
     scales, q = footprint_gaussians(xyz, 2 * math.pi / 512, 0.6, 0.1, caps)
     R = quat_to_rotmat(q)
-    torch.testing.assert_close(R[:, :, 2], xyz / 3.0)                        # facing the centre, as before
+    torch.testing.assert_close(R[:, :, 2], xyz / 3.0)  # facing the centre, as before
     east = torch.stack([torch.cos(lon), torch.zeros_like(lon), -torch.sin(lon)], -1)
     assert torch.allclose((R[:2, :, 0] * east[:2]).sum(-1).abs(), torch.ones(2, dtype=torch.float64))
     torch.testing.assert_close(scales[:2, 0], 0.6 * 3.0 * caps.ring_rad(lat[:2]))
@@ -180,13 +196,12 @@ def test_cap_ellipses_are_narrow_along_the_ring():
     torch.testing.assert_close(scales[2], torch.tensor([0.6, 0.6, 0.1], dtype=torch.float64) * 3 * 2 * math.pi / 512)
 
 
-
 def test_footprint_width_is_the_rendered_width():
     """With the rasterizer's low-pass at the viewing size, a disc's tangent variance plus that low-pass
     is (width x spacing)^2: what the view shows is as wide relative to the spacing on a fine grid (the
     caps) as on a coarse one; never below half the nominal width; thickness untouched."""
     caps = polar_caps(512, 1024, 2.0, 60.0)
-    lat = torch.tensor([1.2, -1.3, 0.2], dtype=torch.float64)                 # north cap, south cap, P_f
+    lat = torch.tensor([1.2, -1.3, 0.2], dtype=torch.float64)  # north cap, south cap, P_f
     xyz = 3.0 * lonlat_to_direction(torch.tensor([0.3, -2.0, 1.0], dtype=torch.float64), lat)
     plain, _ = footprint_gaussians(xyz, 2 * math.pi / 512, 0.6, 0.1, caps)
     low = EPS2D * view_pixel_rad(512, 47.43) ** 2
@@ -205,9 +220,9 @@ def test_caps_only_where_the_poles_hold_detail():
     from holoflow.geometry.area import called_for, ring_detail
 
     width = 512
-    pano = _ring_texture(width)                                   # 24 cycles a ring, everywhere
+    pano = _ring_texture(width)  # 24 cycles a ring, everywhere
     lat = math.pi / 2 - (torch.arange(width // 2) + 0.5) * math.pi / (width // 2)
-    pano[lat < 0] = 0.4                                           # the southern half plain
+    pano[lat < 0] = 0.4  # the southern half plain
     caps = polar_caps(width // 2, width, 2.0, 65.0)
     on, detail = called_for(caps, pano, width // 2, 1.0)
     assert on.north and not on.south and detail["south"] < 1e-20 and detail["north"] > detail["sides"] > 0

@@ -1,4 +1,5 @@
 """cameras.json, nerfstudio transforms.json and COLMAP text round-trip and use the right conventions."""
+
 import json
 
 import torch
@@ -23,8 +24,20 @@ def _cams():
     V = torch.cat([base, sup])
     K = intrinsics_from_fov(47.4, 64, 48, dtype=torch.float64)
     names = [f"{i:03d}" for i in range(5)] + [f"{i // 4:03d}_{i % 4}" for i in range(20)]
-    return cameras_json(K, V, 64, 48, names, [f"views/{x}.exr" for x in names],
-                        kinds=["base"] * 5 + ["supplementary"] * 20, bases=list(range(5)) + [i // 4 for i in range(20)]), K, V
+    return (
+        cameras_json(
+            K,
+            V,
+            64,
+            48,
+            names,
+            [f"views/{x}.exr" for x in names],
+            kinds=["base"] * 5 + ["supplementary"] * 20,
+            bases=list(range(5)) + [i // 4 for i in range(20)],
+        ),
+        K,
+        V,
+    )
 
 
 def test_cameras_json_round_trip(tmp_path):
@@ -83,5 +96,6 @@ def test_look_at_camera_through_exports(tmp_path):
     write_transforms(tmp_path / "t.json", cams)
     write_colmap(tmp_path / "c", cams)
     for back in (read_transforms(tmp_path / "t.json"), read_colmap(tmp_path / "c")):
-        torch.testing.assert_close(camera_centers(cameras_tensors(back)[1])[0],
-                                   torch.tensor([1.0, 2, 3], dtype=torch.float64))
+        torch.testing.assert_close(
+            camera_centers(cameras_tensors(back)[1])[0], torch.tensor([1.0, 2, 3], dtype=torch.float64)
+        )

@@ -1,6 +1,7 @@
 """Ramp-drawn occlusion edges made steps (holoflow/geometry/edges.py): a ramp between a near and a far
 surface, smooth surfaces left alone, and the box before a wall (tests/geometry/test_layers.py)
 with its depth blurred as an estimator draws it, seen off centre."""
+
 import math
 
 import pytest
@@ -22,15 +23,15 @@ def test_a_ramp_becomes_a_step_and_its_layer_lies_on_the_far_side():
     d = row.expand(16, -1).clone()
     s = snap_depth_edges(d, radius=2, ratio=0.25, tol=0.1, rounds=2)
     near, far = (s <= 1.04 * 1.1), (s >= 1.5 / 1.1)
-    assert (near | far).all()                                                 # no pixel left in between
-    assert near[:, :15].all() and far[:, 15:].all()                          # each went to the side it is nearer
-    assert torch.equal(s[:, :14], d[:, :14]) and torch.equal(s[:, 18:], d[:, 18:])   # the plateaus keep theirs
+    assert (near | far).all()  # no pixel left in between
+    assert near[:, :15].all() and far[:, 15:].all()  # each went to the side it is nearer
+    assert torch.equal(s[:, :14], d[:, :14]) and torch.equal(s[:, 18:], d[:, 18:])  # the plateaus keep theirs
     rgb = torch.rand(16, 32, 3, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
     for depth, ok in ((s, True), (d, False)):
         ld, _ = background_layer(rgb, depth, depth_gradient_mask(depth, 0.4), 1.0)
-        under = ld[8, :15][torch.isfinite(ld[8, :15])]                        # the layer under the near side
+        under = ld[8, :15][torch.isfinite(ld[8, :15])]  # the layer under the near side
         assert len(under) > 0
-        assert bool((under >= 1.5).all()) == ok                              # the ramp's 1.15 / 1.35 m without
+        assert bool((under >= 1.5).all()) == ok  # the ramp's 1.15 / 1.35 m without
 
 
 def test_smooth_surfaces_are_left_alone():
@@ -38,10 +39,10 @@ def test_smooth_surfaces_are_left_alone():
     # floor seen at 80 deg incidence (relative gradient tan 80 deg x the pixel angle)
     H, W = 32, 128
     cols = torch.arange(W, dtype=torch.float64)
-    d = (1.0 / (0.5 + 0.15 * torch.sin(2 * math.pi * cols / W))).expand(H, W).clone()   # 1.5 .. 2.9 m, <= 2.3 % a pixel
+    d = (1.0 / (0.5 + 0.15 * torch.sin(2 * math.pi * cols / W))).expand(H, W).clone()  # 1.5 .. 2.9 m, <= 2.3 % a pixel
     assert torch.equal(snap_depth_edges(d), d)
     rows = torch.arange(H, dtype=torch.float64)[:, None]
-    g = math.tan(math.radians(80)) * 2 * math.pi / 1536       # a surface at 80 deg incidence in a 1536 px P_f
+    g = math.tan(math.radians(80)) * 2 * math.pi / 1536  # a surface at 80 deg incidence in a 1536 px P_f
     d2 = torch.exp(g * rows).expand(H, W).clone()
     assert torch.equal(snap_depth_edges(d2), d2)
     assert torch.equal(snap_depth_edges(d, radius=0), d)
@@ -64,10 +65,15 @@ def ramped_box_cloud(H: int, W: int, ramp: int, snap: bool, slope: bool) -> tupl
     return torch.cat([xyz, lxyz]), torch.cat([col, lcol])
 
 
-@pytest.mark.parametrize("ramp, eye_m, snap, slope, holes", [
-    (3, 1.0, True, False, False), (3, 1.0, False, False, True),      # the ramps made steps, or kept
-    (7, 0.5, True, False, False), (7, 0.5, True, True, True),        # the layer at its edge's depth, or sloped
-])
+@pytest.mark.parametrize(
+    "ramp, eye_m, snap, slope, holes",
+    [
+        (3, 1.0, True, False, False),
+        (3, 1.0, False, False, True),  # the ramps made steps, or kept
+        (7, 0.5, True, False, False),
+        (7, 0.5, True, True, True),  # the layer at its edge's depth, or sloped
+    ],
+)
 def test_box_with_ramped_depth_off_centre(ramp, eye_m, snap, slope, holes):
     """The footprint Gaussians of P_f + layer (transfer_opt's init) rendered ``eye_m`` right of the
     centre (the layer's baseline is 1 m), looking past the box. The stage's defaults (ramps snapped,
@@ -78,8 +84,12 @@ def test_box_with_ramped_depth_off_centre(ramp, eye_m, snap, slope, holes):
 
     H, W = 128, 256
     xyz, col = ramped_box_cloud(H, W, ramp, snap, slope)
-    model = init_model(xyz.numpy(), (col.numpy() * 255 + 0.5).astype("uint8"), 0.99,
-                       footprint=(2 * math.pi / W, TransferOptParams().footprint_width, 0.1))
+    model = init_model(
+        xyz.numpy(),
+        (col.numpy() * 255 + 0.5).astype("uint8"),
+        0.99,
+        footprint=(2 * math.pi / W, TransferOptParams().footprint_width, 0.1),
+    )
     size = 96
     K = intrinsics_from_fov(47.43, size, size, dtype=torch.float32)
     eye = torch.tensor([[eye_m, 0.0, 0.0]])

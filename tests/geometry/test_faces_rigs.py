@@ -1,4 +1,5 @@
 """Icosahedron tangent faces tile the sphere once; the base rig covers it; supplementary cameras move right."""
+
 import math
 
 import pytest
@@ -41,8 +42,12 @@ def test_triangles_tile_sphere_exactly_once(dtype, device):
     # exact poles, the seam and points on face edges too
     v = faces.vertices
     mids = (v + v.roll(1, dims=1)).reshape(-1, 3)
-    extra = torch.cat([torch.tensor([[0, -1, 0], [0, 1, 0], [0, 0, -1], [-1e-9, 0, -1]], dtype=dtype, device=device),
-                       mids / torch.linalg.vector_norm(mids, dim=-1, keepdim=True)])
+    extra = torch.cat(
+        [
+            torch.tensor([[0, -1, 0], [0, 1, 0], [0, 0, -1], [-1e-9, 0, -1]], dtype=dtype, device=device),
+            mids / torch.linalg.vector_norm(mids, dim=-1, keepdim=True),
+        ]
+    )
     dirs = torch.cat([dirs, extra])
     planes = _edge_planes(faces)
     s = torch.einsum("fkj,nj->nfk", planes, dirs).amin(-1)  # [N, 20] signed distance to the nearest edge
@@ -70,7 +75,9 @@ def test_triangle_masks_partition_pixels(dtype):
     # total solid angle of the masked pixels ~ 4 pi
     _, d = pinhole_rays(faces.K, faces.viewmat, 48, 48)
     fx, fy = faces.K[:, 0, 0], faces.K[:, 1, 1]
-    cos3 = (d @ faces.centers[:, None, :, None]).squeeze(-1).clamp(min=0) ** 3  # [20, s, s] solid angle ~ cos^3 / (fx fy)
+    cos3 = (d @ faces.centers[:, None, :, None]).squeeze(-1).clamp(
+        min=0
+    ) ** 3  # [20, s, s] solid angle ~ cos^3 / (fx fy)
     omega = (cos3 / (fx * fy)[:, None, None] * mask).sum()
     assert abs(float(omega) - 4 * math.pi) < 0.02 * 4 * math.pi
 
@@ -125,6 +132,13 @@ def test_supplementary_rig(dtype):
     fwd = sup[:, 2, :3].reshape(6, 4, 3)
     fwd_in_base = torch.einsum("mij,mkj->mki", Rb, fwd)  # [6, 4, 3]
     a = math.radians(10.0)
-    expected = torch.tensor([[0, math.sin(a), math.cos(a)], [0, -math.sin(a), math.cos(a)],
-                             [math.sin(a), 0, math.cos(a)], [-math.sin(a), 0, math.cos(a)]], dtype=dtype)
+    expected = torch.tensor(
+        [
+            [0, math.sin(a), math.cos(a)],
+            [0, -math.sin(a), math.cos(a)],
+            [math.sin(a), 0, math.cos(a)],
+            [-math.sin(a), 0, math.cos(a)],
+        ],
+        dtype=dtype,
+    )
     torch.testing.assert_close(fwd_in_base, expected.expand(6, 4, 3), atol=1e-6, rtol=0)

@@ -1,5 +1,6 @@
 """The background layer (holoflow/geometry/layers.py): a synthetic step edge, the sky shell under a
 silhouette, and a box in front of a wall seen 0.5 m off centre with and without the layer."""
+
 import math
 
 import pytest
@@ -30,7 +31,7 @@ def step_edge(H=64, W=128, near=2.0, far=4.0):
 
 def test_step_edge_band_width_depth_and_colour():
     rgb, d, keep = step_edge()
-    assert keep[:, 39].all() and not keep[:, 40].any() and not keep[:, 59].any()   # the near side's edge is dropped
+    assert keep[:, 39].all() and not keep[:, 40].any() and not keep[:, 59].any()  # the near side's edge is dropped
     step = 2 * math.pi / 128
     for baseline in (0.5, 1.0):
         ld, lc = background_layer(rgb, d, keep, baseline)
@@ -39,11 +40,11 @@ def test_step_edge_band_width_depth_and_colour():
         # counted from the last far pixel (39 and 60)
         width = int(baseline * (1 / 2 - 1 / 4) / step + 1)
         assert width >= 3
-        assert row[40:40 + width].all() and not row[40 + width:60 - width].any()
-        assert row[60 - width:60].all() and not row[:40].any() and not row[60:].any()
-        torch.testing.assert_close(ld[32][row], torch.full_like(ld[32][row], 4.0))   # the far wall's depth
-        torch.testing.assert_close(lc[32][row], RED.expand(int(row.sum()), 3))       # the far wall's colour
-    assert not torch.isfinite(background_layer(rgb, d, keep, 0.0)[0][8:56, 42:58]).any()   # off the poles
+        assert row[40 : 40 + width].all() and not row[40 + width : 60 - width].any()
+        assert row[60 - width : 60].all() and not row[:40].any() and not row[60:].any()
+        torch.testing.assert_close(ld[32][row], torch.full_like(ld[32][row], 4.0))  # the far wall's depth
+        torch.testing.assert_close(lc[32][row], RED.expand(int(row.sum()), 3))  # the far wall's colour
+    assert not torch.isfinite(background_layer(rgb, d, keep, 0.0)[0][8:56, 42:58]).any()  # off the poles
     full = torch.isfinite(background_layer(rgb, d, keep, 1.0)[0])
     sparse = torch.isfinite(background_layer(rgb, d, keep, 1.0, stride=2)[0])
     assert torch.equal(sparse[::2, ::2], full[::2, ::2]) and int(sparse.sum()) == int(full[::2, ::2].sum())
@@ -60,8 +61,8 @@ def test_layer_extends_a_slanted_far_surface_in_inverse_depth():
     keep = depth_gradient_mask(d, 0.4)
     ld, _ = background_layer(rgb, d, keep, 1.0, slope=True)
     band = torch.isfinite(ld[16])
-    band[50:] = False                                              # the left edge's side only (the seam,
-    band[:30] = False                                              # where inverse depth jumps, has its own)
+    band[50:] = False  # the left edge's side only (the seam,
+    band[:30] = False  # where inverse depth jumps, has its own)
     c = cols[band]
     assert len(c) >= 5
     torch.testing.assert_close(1.0 / ld[16][band], 0.25 - 0.001 * c, rtol=1e-9, atol=1e-12)
@@ -79,7 +80,7 @@ def test_sky_shell_continues_under_a_silhouette():
     torch.testing.assert_close(ld[torch.isfinite(ld)], torch.full_like(ld[torch.isfinite(ld)], 100.0))
 
 
-ROOM = torch.tensor([3.0, 2.0, 3.0], dtype=torch.float64)                  # half sizes (m)
+ROOM = torch.tensor([3.0, 2.0, 3.0], dtype=torch.float64)  # half sizes (m)
 BOX = (torch.tensor([-0.3, -0.5, 1.5], dtype=torch.float64), torch.tensor([0.3, 0.5, 2.0], dtype=torch.float64))
 
 
@@ -87,7 +88,7 @@ def cast(origins, dirs):
     """Ray cast (origins, unit dirs [..., 3], inside the room) into a 6 x 4 x 6 m room with a 0.6 x 1 x
     0.5 m box 1.5 m in front of the centre (z): (distance [...] m, hit the box [...] bool)."""
     inv = 1.0 / torch.where(dirs.abs() < 1e-12, torch.full_like(dirs, 1e-12), dirs)
-    t_room = ((torch.sign(inv) * ROOM - origins) * inv).amin(-1)              # exit of the room
+    t_room = ((torch.sign(inv) * ROOM - origins) * inv).amin(-1)  # exit of the room
     t1, t2 = (BOX[0] - origins) * inv, (BOX[1] - origins) * inv
     t_in, t_out = torch.minimum(t1, t2).amax(-1), torch.maximum(t1, t2).amin(-1)
     box = (t_in < t_out) & (t_in > 0)
@@ -97,7 +98,7 @@ def cast(origins, dirs):
 def room_with_box(H, W):
     """The analytic RGB-D panorama of ``cast`` from the origin: rgb [H, W, 3] (walls in 0.5 m stripes,
     the box blue), radial depth [H, W]."""
-    dirs = equirect_directions(H, W, dtype=torch.float64)                     # [H, W, 3]
+    dirs = equirect_directions(H, W, dtype=torch.float64)  # [H, W, 3]
     depth, box = cast(torch.zeros_like(dirs), dirs)
     x = dirs * depth[..., None]
     stripe = (torch.floor(2 * (x[..., 0] + x[..., 1] + x[..., 2])) % 2)[..., None]
@@ -128,11 +129,11 @@ def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
     K = intrinsics_from_fov(47.43, size, size, dtype=torch.float64)
     eye = torch.tensor([[0.5, 0.0, 0.0]], dtype=torch.float64)
     V = look_at(eye, eye + torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64))[0]
-    o, d = pinhole_rays(K, V, size, size)                                   # [H, W, 3] each
+    o, d = pinhole_rays(K, V, size, size)  # [H, W, 3] each
     t, on_box = cast(o, d)
-    X = o + t[..., None] * d                                                # what the camera sees
+    X = o + t[..., None] * d  # what the camera sees
     r = torch.linalg.vector_norm(X, dim=-1)
-    hidden = ~on_box & (cast(torch.zeros_like(X), X / r[..., None])[0] < r - 1e-6)   # the box hides it
+    hidden = ~on_box & (cast(torch.zeros_like(X), X / r[..., None])[0] < r - 1e-6)  # the box hides it
     assert hidden.double().mean() > 0.03
     radius = footprint_radius(xyz, V, K, 2 * math.pi / W)
     _, hit, _ = project_points_zbuffer(xyz, col, K, V, size, size, radius)
@@ -155,16 +156,24 @@ def test_box_scene_after_a_tiny_optimisation(with_layer):
 
     H, W = 64, 128
     xyz, col = box_room_cloud(H, W, with_layer)
-    model = init_model(xyz.numpy(), (col.numpy() * 255 + 0.5).astype("uint8"), 0.99,
-                       footprint=(2 * math.pi / W, TransferOptParams().footprint_width, 0.1))  # transfer_opt's init
+    model = init_model(
+        xyz.numpy(),
+        (col.numpy() * 255 + 0.5).astype("uint8"),
+        0.99,
+        footprint=(2 * math.pi / W, TransferOptParams().footprint_width, 0.1),
+    )  # transfer_opt's init
     size = 32
     K = intrinsics_from_fov(90.0, size, size, dtype=torch.float32)
     V = base_rig(12, dtype=torch.float32)
     rgb, _ = room_with_box(H, W)
-    images = equirect_to_pinhole(rgb.permute(2, 0, 1).float(), K.expand(12, 3, 3), V, size, size)   # [12, 3, s, s]
+    images = equirect_to_pinhole(rgb.permute(2, 0, 1).float(), K.expand(12, 3, 3), V, size, size)  # [12, 3, s, s]
     views = [dict(image=im.permute(1, 2, 0).contiguous(), mask=None, viewmat=v, K=K) for im, v in zip(images, V)]
-    train(model, views, TrainConfig(iterations=30, densify_every=10, densify_from=5, densify_until=20,
-                                    backend="cpu"), seed=0)
+    train(
+        model,
+        views,
+        TrainConfig(iterations=30, densify_every=10, densify_from=5, densify_until=20, backend="cpu"),
+        seed=0,
+    )
     size = 64
     K = intrinsics_from_fov(47.43, size, size, dtype=torch.float64)
     eye = torch.tensor([[0.5, 0.0, 0.0]], dtype=torch.float64)

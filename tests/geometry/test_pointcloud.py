@@ -1,4 +1,5 @@
 """RGB-D back-projection, the depth-gradient filter, and z-buffer projection of a known scene."""
+
 import math
 
 import pytest
@@ -20,7 +21,7 @@ def cast(origins, dirs):
     c = torch.tensor(BALL_C, dtype=dirs.dtype, device=dirs.device)
     oc = origins - c
     b = (oc * dirs).sum(-1)
-    disc = b * b - ((oc * oc).sum(-1) - BALL_R ** 2)
+    disc = b * b - ((oc * oc).sum(-1) - BALL_R**2)
     t_ball = -b - torch.sqrt(disc.clamp(min=0))
     hit_ball = (disc > 0) & (t_ball > 0)
     return torch.where(hit_ball & (t_ball < t_box), t_ball, t_box)
@@ -28,9 +29,14 @@ def cast(origins, dirs):
 
 def colour(p):
     """Smooth colour [..., 3] of a world point."""
-    return torch.stack([0.5 + 0.4 * torch.sin(1.3 * p[..., 0] + 0.4 * p[..., 2]),
-                        0.5 + 0.4 * torch.cos(1.1 * p[..., 1] - 0.3 * p[..., 0]),
-                        0.5 + 0.3 * torch.sin(0.9 * p[..., 2] + p[..., 1])], -1)
+    return torch.stack(
+        [
+            0.5 + 0.4 * torch.sin(1.3 * p[..., 0] + 0.4 * p[..., 2]),
+            0.5 + 0.4 * torch.cos(1.1 * p[..., 1] - 0.3 * p[..., 0]),
+            0.5 + 0.3 * torch.sin(0.9 * p[..., 2] + p[..., 1]),
+        ],
+        -1,
+    )
 
 
 def rgbd_pano(H, W, dtype, device):
@@ -45,7 +51,9 @@ def test_equirect_to_points_skips_non_finite(dtype, device):
     depth[0, 0], depth[1, 1], depth[2, 2], depth[3, 3] = float("inf"), float("nan"), 0.0, -1.0
     xyz, col = equirect_to_points(rgb, depth)
     assert xyz.shape == (28, 3) and col.shape == (28, 3)
-    torch.testing.assert_close(torch.linalg.vector_norm(xyz, dim=-1), torch.full((28,), 2.0, dtype=dtype, device=device))
+    torch.testing.assert_close(
+        torch.linalg.vector_norm(xyz, dim=-1), torch.full((28,), 2.0, dtype=dtype, device=device)
+    )
     assert torch.equal(col[0], rgb[0, 1])
 
 
@@ -121,8 +129,11 @@ def test_zbuffer_reproduces_view_and_flags_disocclusion(dtype, device, radius):
 def test_zbuffer_nearest_wins_and_edge_cases(dtype, device):
     K = intrinsics_from_fov(90.0, 4, 4, device=device, dtype=dtype)
     V = torch.eye(4, dtype=dtype, device=device)
-    xyz = torch.tensor([[0.1, 0.1, 2.0], [0.1, 0.1, 1.0], [0.1, 0.1, 3.0], [0, 0, -1.0],
-                        [float("nan"), 0, 1], [100.0, 0, 1]], dtype=dtype, device=device)
+    xyz = torch.tensor(
+        [[0.1, 0.1, 2.0], [0.1, 0.1, 1.0], [0.1, 0.1, 3.0], [0, 0, -1.0], [float("nan"), 0, 1], [100.0, 0, 1]],
+        dtype=dtype,
+        device=device,
+    )
     col = torch.tensor([[1.0], [2.0], [3.0], [4.0], [5.0], [6.0]], dtype=dtype, device=device)
     img, mask, depth = project_points_zbuffer(xyz, col, K, V, 4, 4)
     assert int(mask.sum()) == 1 and float(img[2, 2, 0]) == 2.0 and float(depth[2, 2]) == 1.0
@@ -159,8 +170,10 @@ def test_footprint_radius_closes_sampling_gaps(dtype, device):
     rgb, t = rgbd_pano(64, 128, dtype, device)
     xyz, col = equirect_to_points(rgb, t)
     K = intrinsics_from_fov(60.0, 48, 48, device=device, dtype=dtype)
-    V = look_at(torch.tensor([0.3, 0.0, 0.0], dtype=dtype, device=device),
-                torch.tensor([0.3, 0.25, 1.0], dtype=dtype, device=device))
+    V = look_at(
+        torch.tensor([0.3, 0.0, 0.0], dtype=dtype, device=device),
+        torch.tensor([0.3, 0.25, 1.0], dtype=dtype, device=device),
+    )
     o, d = pinhole_rays(K, V, 48, 48)
     p = o + cast(o, d)[..., None] * d
     back = cast(torch.zeros_like(p), p / torch.linalg.vector_norm(p, dim=-1, keepdim=True))

@@ -1,4 +1,5 @@
 """equirect <-> pinhole resampling against an analytic panorama, through the poles and the seam."""
+
 import math
 
 import pytest
@@ -34,8 +35,9 @@ TARGETS = [[0, -1, 0], [0, 1, 0], [0, 0, -1], [1, 0, 0], [0.1, -1, -0.05], [-0.3
 
 def _cams(dtype, device, fov=90.0, size=32):
     K = intrinsics_from_fov(fov, size, size, device=device, dtype=dtype).expand(len(TARGETS), 3, 3)
-    V = look_at(torch.zeros(len(TARGETS), 3, dtype=dtype, device=device),
-                torch.tensor(TARGETS, dtype=dtype, device=device))
+    V = look_at(
+        torch.zeros(len(TARGETS), 3, dtype=dtype, device=device), torch.tensor(TARGETS, dtype=dtype, device=device)
+    )
     return K, V
 
 
@@ -57,7 +59,9 @@ def test_e2p_seam_is_continuous(dtype, device):
     """A view centred on the seam sees no jump: columns either side of the image centre differ smoothly."""
     pano = analytic_pano(64, 128, dtype, device)
     K = intrinsics_from_fov(60.0, 64, 64, device=device, dtype=dtype)[None]
-    V = look_at(torch.zeros(3, dtype=dtype, device=device), torch.tensor([0.0, 0, -1], dtype=dtype, device=device))[None]
+    V = look_at(torch.zeros(3, dtype=dtype, device=device), torch.tensor([0.0, 0, -1], dtype=dtype, device=device))[
+        None
+    ]
     view = equirect_to_pinhole(pano, K, V, 64, 64)[0]
     steps = (view[:, :, 1:] - view[:, :, :-1]).abs()
     assert float(steps.max()) < 0.03
@@ -100,8 +104,8 @@ def _p2e_dense(images, K, viewmat, height, width, weights):
         uv, z = project_points(dirs, K[b], viewmat[b])
         inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= w) & (uv[:, 1] >= 0) & (uv[:, 1] <= h)
         grid = torch.stack([uv[:, 0] * (2.0 / w) - 1.0, uv[:, 1] * (2.0 / h) - 1.0], -1)[inside].reshape(1, 1, -1, 2)
-        col = F.grid_sample(images[b:b + 1], grid, align_corners=False, padding_mode="border").reshape(C, -1)
-        wt = F.grid_sample(weights[b:b + 1], grid, align_corners=False, padding_mode="border").reshape(1, -1)
+        col = F.grid_sample(images[b : b + 1], grid, align_corners=False, padding_mode="border").reshape(C, -1)
+        wt = F.grid_sample(weights[b : b + 1], grid, align_corners=False, padding_mode="border").reshape(1, -1)
         accum[:, inside] += col * wt
         wsum[:, inside] += wt
     return accum.reshape(C, height, width), wsum.reshape(1, height, width)
@@ -169,16 +173,16 @@ def test_ring_prefilter_box_along_the_ring(dtype, device):
     mean; in between it is the exact box integral (checked against a brute-force sum on one row)."""
     g = torch.Generator().manual_seed(0)
     pano = torch.rand(3, 64, 128, generator=g, dtype=torch.float64).to(dtype).to(device)
-    out = ring_prefilter(pano, 2 * math.pi / 128 * 0.5)      # 0.5 / sin(colat) columns: only rows near the poles
+    out = ring_prefilter(pano, 2 * math.pi / 128 * 0.5)  # 0.5 / sin(colat) columns: only rows near the poles
     colat = (torch.arange(64, dtype=torch.float64) + 0.5) * math.pi / 64
     plain = 0.5 / torch.sin(colat) <= 1
     assert torch.equal(out[:, plain], pano[:, plain])
     torch.testing.assert_close(ring_prefilter(pano, 10.0)[:, 0], pano[:, 0].mean(-1, keepdim=True).expand(3, 128))
-    r, width = 2, float(0.5 / torch.sin(colat[2]))             # row 2: a box ~3.3 columns wide
-    fine = pano[:, r].double().repeat_interleave(1000, -1)      # each pixel as 1000 constant sub-samples
-    c = 1000 * 40 + 500                                         # the centre of pixel 40
+    r, width = 2, float(0.5 / torch.sin(colat[2]))  # row 2: a box ~3.3 columns wide
+    fine = pano[:, r].double().repeat_interleave(1000, -1)  # each pixel as 1000 constant sub-samples
+    c = 1000 * 40 + 500  # the centre of pixel 40
     half = round(500 * width)
-    want = fine[:, c - half:c + half].mean(-1)
+    want = fine[:, c - half : c + half].mean(-1)
     torch.testing.assert_close(out[:, r, 40].double(), want, atol=2e-3, rtol=0)
 
 
@@ -188,7 +192,7 @@ def test_e2p_antialias_zenith_matches_supersampling(dtype, device):
     the plain 2 x 2 supersampling of the panorama aliases them into moire."""
     stripes = (torch.arange(512) % 2).to(dtype).to(device).expand(1, 256, 512).contiguous()
     K, V = _cams(dtype, device, fov=47.43, size=32)
-    K, V = K[:1], V[:1]                                          # straight up
+    K, V = K[:1], V[:1]  # straight up
 
     def supersampled(n):
         k = torch.diag(torch.tensor([float(n), float(n), 1.0], dtype=dtype, device=device)) @ K
@@ -234,8 +238,11 @@ def test_one_pixel_and_non_square_panoramas(dtype, device):
 
 def _odd_cameras(dtype, device):
     """Views through both poles, across the seam, oblique, with fx != fy and skew, non-square images."""
-    targets = torch.tensor([[0, -1, 0], [0, 1, 0], [0, 0, -1], [-0.02, 0.3, -1], [0.7, -0.5, 0.2], [0.1, -1, -0.05]],
-                           dtype=dtype, device=device)
+    targets = torch.tensor(
+        [[0, -1, 0], [0, 1, 0], [0, 0, -1], [-0.02, 0.3, -1], [0.7, -0.5, 0.2], [0.1, -1, -0.05]],
+        dtype=dtype,
+        device=device,
+    )
     V = look_at(torch.zeros_like(targets), targets)
     K = intrinsics_from_fov(100.0, 40, 24, device=device, dtype=dtype).repeat(len(targets), 1, 1)
     K[1, 1, 1] *= 1.3  # fx != fy
@@ -279,13 +286,13 @@ def test_equirect_window_matches_definition(H, W):
         for c0, c1 in [(-pad, W + pad), (0, W), (W - 1, W + 2), (-2, 1)]:
             win = equirect_window(pano, r0, r1, c0, c1)
             assert win.is_contiguous()
-            assert torch.equal(win, ref[:, r0 + pad:r1 + pad, c0 + pad:c1 + pad]), (r0, r1, c0, c1)
+            assert torch.equal(win, ref[:, r0 + pad : r1 + pad, c0 + pad : c1 + pad]), (r0, r1, c0, c1)
 
 
 @pytest.mark.parametrize("shared_K", [True, False])
 def test_e2p_in_batches_equals_one_call(shared_K):
     pano = analytic_pano(32, 64, torch.float32, "cpu")
-    K, V = _cams(torch.float32, "cpu", size=16)                              # 6 cameras
+    K, V = _cams(torch.float32, "cpu", size=16)  # 6 cameras
     K = K[0] if shared_K else K
     batches = list(equirect_to_pinhole_batches(pano, K, V, 16, 16, batch=4))
     assert [start for start, _ in batches] == [0, 4] and [len(v) for _, v in batches] == [4, 2]

@@ -1,5 +1,6 @@
 """The sky dome (holoflow/geometry/clouds.py): where a panorama shows sky, P_f gets coarse points behind
 everything in the directions that are not sky, coloured by the sky; none without sky."""
+
 import torch
 
 from holoflow.geometry.clouds import fill_from, point_clouds, sky_dome
@@ -14,18 +15,19 @@ def test_fill_keeps_what_is_known_and_fills_the_rest_from_it():
     out = fill_from(values, known)
     assert torch.equal(out[known], values[known]) and torch.isfinite(out).all()
     lo, hi = values[known].amin(0), values[known].amax(0)
-    assert ((out >= lo - 1e-6) & (out <= hi + 1e-6)).all()         # averages of what is known
+    assert ((out >= lo - 1e-6) & (out <= hi + 1e-6)).all()  # averages of what is known
     one = torch.zeros(8, 16, dtype=torch.bool)
-    one[3, 15] = True                                             # one known pixel: everything takes it
+    one[3, 15] = True  # one known pixel: everything takes it
     assert torch.allclose(fill_from(values[:8, :16], one), values[3, 15].expand(8, 16, 3))
 
 
 def _room_with_window(H=64, W=128):
     """A 2 m sphere room with a window (sky, inf depth) 20 deg wide ahead: rgb [H, W, 3], depth [H, W]."""
     dirs = equirect_directions(H, W, dtype=torch.float64)
-    window = (dirs[..., 2] > 0.95)
-    depth = torch.where(window, torch.full((H, W), float("inf"), dtype=torch.float64), torch.full((H, W), 2.0,
-                                                                                                   dtype=torch.float64))
+    window = dirs[..., 2] > 0.95
+    depth = torch.where(
+        window, torch.full((H, W), float("inf"), dtype=torch.float64), torch.full((H, W), 2.0, dtype=torch.float64)
+    )
     rgb = torch.where(window[..., None], torch.tensor([0.5, 0.7, 0.9]), torch.tensor([0.3, 0.2, 0.1]))
     return rgb.float(), depth, window
 
@@ -36,7 +38,7 @@ def test_the_dome_is_behind_the_shell_where_the_panorama_is_not_sky_coloured_as_
     assert len(xyz) > 0.9 * 64 * 32 * (1 - window.double().mean())
     assert torch.allclose(torch.linalg.vector_norm(xyz, dim=-1), torch.full((len(xyz),), 10.0, dtype=xyz.dtype))
     assert torch.allclose(colour, torch.tensor([0.5, 0.7, 0.9]).expand_as(colour), atol=1e-5)
-    assert float((xyz[:, 2] / 10.0).max()) < 0.99                  # nothing straight ahead: the window is sky
+    assert float((xyz[:, 2] / 10.0).max()) < 0.99  # nothing straight ahead: the window is sky
 
 
 def test_point_clouds_add_a_dome_only_where_there_is_sky():
@@ -46,6 +48,7 @@ def test_point_clouds_add_a_dome_only_where_there_is_sky():
     assert with_sky.pf["dome"]["points"] == with_sky.meta["points"]["pf_dome"] > 0
     closed = point_clouds(rgb, torch.full_like(depth, 2.0), cfg)
     assert "dome" not in closed.pf and "pf_dome" not in closed.meta["points"]
-    off = point_clouds(rgb, depth, PointCloudParams(pf_width=128, layer_baseline=0.0, pf_polar_density=1.0,
-                                                   sky_dome=False))
+    off = point_clouds(
+        rgb, depth, PointCloudParams(pf_width=128, layer_baseline=0.0, pf_polar_density=1.0, sky_dome=False)
+    )
     assert "dome" not in off.pf

@@ -1,4 +1,5 @@
 """Conventions of holoflow.geometry.sphere and .camera (docs/conventions.md), incl. poles and the seam."""
+
 import math
 
 import pytest
@@ -28,10 +29,12 @@ from holoflow.geometry.sphere import (
 TOL = {torch.float32: 2e-6, torch.float64: 1e-12}
 PI = math.pi
 # exact poles, the seam (+-pi), face-edge-like and ordinary values
-lons = st.one_of(st.sampled_from([-PI, PI, 0.0, PI / 2, -PI / 2, math.atan(0.5), 3.0]),
-                 st.floats(-PI, PI, allow_nan=False))
-lats = st.one_of(st.sampled_from([PI / 2, -PI / 2, 0.0, math.atan(0.5), 1.5707]),
-                 st.floats(-PI / 2, PI / 2, allow_nan=False))
+lons = st.one_of(
+    st.sampled_from([-PI, PI, 0.0, PI / 2, -PI / 2, math.atan(0.5), 3.0]), st.floats(-PI, PI, allow_nan=False)
+)
+lats = st.one_of(
+    st.sampled_from([PI / 2, -PI / 2, 0.0, math.atan(0.5), 1.5707]), st.floats(-PI / 2, PI / 2, allow_nan=False)
+)
 
 
 def test_anchor_pixels(dtype, device):
@@ -127,14 +130,19 @@ def test_look_at_forward_is_identity(dtype, device):
 def test_pinhole_rays_and_projection_round_trip(dtype, device):
     K = intrinsics_from_fov(60.0, 8, 6, device=device, dtype=dtype)
     assert float(K[0, 2]) == 4.0 and float(K[1, 2]) == 3.0
-    V = look_at(torch.tensor([1.0, 0, 0], dtype=dtype, device=device), torch.tensor([0.0, 1, 1], dtype=dtype, device=device))
+    V = look_at(
+        torch.tensor([1.0, 0, 0], dtype=dtype, device=device), torch.tensor([0.0, 1, 1], dtype=dtype, device=device)
+    )
     o, d = pinhole_rays(K, V, 6, 8)
     assert o.shape == d.shape == (6, 8, 3)
     torch.testing.assert_close(torch.linalg.vector_norm(d, dim=-1), torch.ones(6, 8, dtype=dtype, device=device))
     pts = (o + 2.5 * d).reshape(-1, 3)
     uv, z = project_points(pts, K, V)
-    ys, xs = torch.meshgrid(torch.arange(6, dtype=dtype, device=device) + 0.5,
-                            torch.arange(8, dtype=dtype, device=device) + 0.5, indexing="ij")
+    ys, xs = torch.meshgrid(
+        torch.arange(6, dtype=dtype, device=device) + 0.5,
+        torch.arange(8, dtype=dtype, device=device) + 0.5,
+        indexing="ij",
+    )
     torch.testing.assert_close(uv, torch.stack([xs, ys], -1).reshape(-1, 2), atol=1e-4, rtol=0)
     assert (z > 0).all()
     # batched: two cameras

@@ -1,4 +1,5 @@
 """point_cloud, pano_set and pcd_set run as processes (the step protocol) on a small synthetic RGB-D pano."""
+
 import contextlib
 import json
 import subprocess
@@ -21,12 +22,25 @@ ROOT = Path(__file__).resolve().parents[2]
 def run_stage(tmp: Path, stage: str, params: dict, inputs: dict) -> subprocess.CompletedProcess:
     out = tmp / f"{stage}_out"
     out.mkdir()
-    job = {"stage": stage, "engine": "default", "params": params, "seed": 0, "prompt": "",
-           "inputs": {k: str(v) for k, v in inputs.items()}, "output_dir": str(out),
-           "work_dir": str(tmp / f"{stage}_work"), "device": "cpu"}
+    job = {
+        "stage": stage,
+        "engine": "default",
+        "params": params,
+        "seed": 0,
+        "prompt": "",
+        "inputs": {k: str(v) for k, v in inputs.items()},
+        "output_dir": str(out),
+        "work_dir": str(tmp / f"{stage}_work"),
+        "device": "cpu",
+    }
     (tmp / f"{stage}.json").write_text(json.dumps(job))
-    return subprocess.run([sys.executable, str(ROOT / "stages" / f"{stage}.py"), str(tmp / f"{stage}.json")],
-                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    return subprocess.run(
+        [sys.executable, str(ROOT / "stages" / f"{stage}.py"), str(tmp / f"{stage}.json")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -43,14 +57,23 @@ def rgbd_dir(tmp_path_factory):
 @pytest.fixture(scope="module")
 def stage_outputs(rgbd_dir, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("stages")
-    pc = run_stage(tmp, "point_cloud", {"p0_width": 128, "pf_width": 64, "ps_width": 64, "grad_threshold": 0.4,
-                                        "sky_radius": 0.0}, {"pano": rgbd_dir, "depth": rgbd_dir})
-    ps = run_stage(tmp, "pano_set", {"rig": "fibonacci", "cameras": 12, "size": 24, "fov_deg": 90.0},
-                   {"pano": rgbd_dir})
+    pc = run_stage(
+        tmp,
+        "point_cloud",
+        {"p0_width": 128, "pf_width": 64, "ps_width": 64, "grad_threshold": 0.4, "sky_radius": 0.0},
+        {"pano": rgbd_dir, "depth": rgbd_dir},
+    )
+    ps = run_stage(
+        tmp, "pano_set", {"rig": "fibonacci", "cameras": 12, "size": 24, "fov_deg": 90.0}, {"pano": rgbd_dir}
+    )
     pcd = None
     if pc.returncode == 0 and ps.returncode == 0:
-        pcd = run_stage(tmp, "pcd_set", {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0},
-                        {"cloud": tmp / "point_cloud_out", "cameras": tmp / "pano_set_out"})
+        pcd = run_stage(
+            tmp,
+            "pcd_set",
+            {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0},
+            {"cloud": tmp / "point_cloud_out", "cameras": tmp / "pano_set_out"},
+        )
     return tmp, pc, ps, pcd
 
 
@@ -66,7 +89,7 @@ def test_point_cloud_stage(stage_outputs):
     meta = [json.loads(ln[6:]) for ln in pc.stdout.splitlines() if ln.startswith("@meta ")][0]
     assert abs(meta["sky_fraction"] - 8 / 64) < 1e-6
     xyzf, _ = read_points(out / "pf.ply")
-    layer = meta["points"]["pf_layer"]       # the background layer follows the filtered grid's points
+    layer = meta["points"]["pf_layer"]  # the background layer follows the filtered grid's points
     assert 0 < len(xyzf) - layer < 64 * 32 and layer > 0 and len(xyzf) == meta["points"]["pf"]
     xyzs, _ = read_points(out / "ps.ply")
     assert len(xyzs) == 64 * 32
@@ -75,8 +98,12 @@ def test_point_cloud_stage(stage_outputs):
 def test_point_cloud_rejects_z_depth(rgbd_dir, tmp_path):
     ch, _ = read_exr(rgbd_dir / "depth.exr")
     write_exr(tmp_path / "depth.exr", ch, {"holoflow.depth_kind": "z"})
-    res = run_stage(tmp_path, "point_cloud", {"p0_width": 32, "pf_width": 16, "ps_width": 16, "grad_threshold": 0.4,
-                                              "sky_radius": 0.0}, {"pano": rgbd_dir, "depth": tmp_path})
+    res = run_stage(
+        tmp_path,
+        "point_cloud",
+        {"p0_width": 32, "pf_width": 16, "ps_width": 16, "grad_threshold": 0.4, "sky_radius": 0.0},
+        {"pano": rgbd_dir, "depth": tmp_path},
+    )
     assert res.returncode != 0 and "radial" in res.stderr and "Traceback" not in res.stderr
 
 
@@ -124,11 +151,17 @@ def test_stage_reruns_are_byte_identical(stage_outputs, rgbd_dir, tmp_path):
     """point_cloud, pano_set and pcd_set run again on the same inputs write byte-identical files."""
     first, pc, ps, pcd = stage_outputs
     assert pc.returncode == ps.returncode == 0 and pcd is not None and pcd.returncode == 0
-    runs = {"point_cloud": ({"p0_width": 128, "pf_width": 64, "ps_width": 64, "grad_threshold": 0.4, "sky_radius": 0.0},
-                            {"pano": rgbd_dir, "depth": rgbd_dir}),
-            "pano_set": ({"rig": "fibonacci", "cameras": 12, "size": 24, "fov_deg": 90.0}, {"pano": rgbd_dir}),
-            "pcd_set": ({"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0},
-                        {"cloud": first / "point_cloud_out", "cameras": first / "pano_set_out"})}
+    runs = {
+        "point_cloud": (
+            {"p0_width": 128, "pf_width": 64, "ps_width": 64, "grad_threshold": 0.4, "sky_radius": 0.0},
+            {"pano": rgbd_dir, "depth": rgbd_dir},
+        ),
+        "pano_set": ({"rig": "fibonacci", "cameras": 12, "size": 24, "fov_deg": 90.0}, {"pano": rgbd_dir}),
+        "pcd_set": (
+            {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0},
+            {"cloud": first / "point_cloud_out", "cameras": first / "pano_set_out"},
+        ),
+    }
     for stage, (params, inputs) in runs.items():
         res = run_stage(tmp_path, stage, params, inputs)
         assert res.returncode == 0, res.stderr
@@ -149,8 +182,12 @@ def test_pcd_set_edge_points_leave_the_image_but_mark_pixels_seen(stage_outputs,
 
     tmp, _, _, plain = stage_outputs
     assert plain is not None and plain.returncode == 0
-    edged = run_stage(tmp_path, "pcd_set", {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0, "edge_threshold": 0.4},
-                      {"cloud": tmp / "point_cloud_out", "cameras": tmp / "pano_set_out"})
+    edged = run_stage(
+        tmp_path,
+        "pcd_set",
+        {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0, "edge_threshold": 0.4},
+        {"cloud": tmp / "point_cloud_out", "cameras": tmp / "pano_set_out"},
+    )
     assert edged.returncode == 0, edged.stderr
     xyz = torch.from_numpy(read_points(tmp / "point_cloud_out" / "ps.ply")[0]).double()
     spacing = 2 * math.pi / math.sqrt(2 * len(xyz))
@@ -159,9 +196,10 @@ def test_pcd_set_edge_points_leave_the_image_but_mark_pixels_seen(stage_outputs,
     gained = 0
     for v, vm in zip(cams["views"], V):
         e, _ = read_exr(tmp_path / "pcd_set_out" / v["file"])
-        with torch_threads(1):    # the step's thread count (cpus 1): the same code path as the step
-            _, hit, _ = project_points_zbuffer(xyz, xyz[:, :1], K, vm, cams["height"], cams["width"],
-                                               footprint_radius(xyz, vm, K, spacing))
+        with torch_threads(1):  # the step's thread count (cpus 1): the same code path as the step
+            _, hit, _ = project_points_zbuffer(
+                xyz, xyz[:, :1], K, vm, cams["height"], cams["width"], footprint_radius(xyz, vm, K, spacing)
+            )
         assert np.array_equal(e["seen"], hit.float().numpy())
         assert (e["A"] <= e["seen"]).all()
         gained += int((e["seen"] > e["A"]).sum())
@@ -180,13 +218,22 @@ def test_pcd_set_offsets_ignore_the_sky_shell(tmp_path):
     src.mkdir()
     write_rgb(src / "pano.exr", rgb.numpy().astype(np.float32), {"holoflow.stage": "detail"})
     write_exr(src / "depth.exr", {"Z": depth.numpy().astype(np.float32)}, {"holoflow.depth_kind": "radial"})
-    pc = run_stage(tmp_path, "point_cloud", {"p0_width": 64, "pf_width": 32, "ps_width": 64, "grad_threshold": 0.4,
-                                             "sky_radius": 0.0}, {"pano": src, "depth": src})
-    ps = run_stage(tmp_path, "pano_set", {"rig": "fibonacci", "cameras": 12, "size": 24, "fov_deg": 90.0},
-                   {"pano": src})
+    pc = run_stage(
+        tmp_path,
+        "point_cloud",
+        {"p0_width": 64, "pf_width": 32, "ps_width": 64, "grad_threshold": 0.4, "sky_radius": 0.0},
+        {"pano": src, "depth": src},
+    )
+    ps = run_stage(
+        tmp_path, "pano_set", {"rig": "fibonacci", "cameras": 12, "size": 24, "fov_deg": 90.0}, {"pano": src}
+    )
     assert pc.returncode == 0 and ps.returncode == 0, pc.stderr + ps.stderr
-    pcd = run_stage(tmp_path, "pcd_set", {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0},
-                    {"cloud": tmp_path / "point_cloud_out", "cameras": tmp_path / "pano_set_out"})
+    pcd = run_stage(
+        tmp_path,
+        "pcd_set",
+        {"offset": 0.1, "angle_deg": 10.0, "splat_radius": 0},
+        {"cloud": tmp_path / "point_cloud_out", "cameras": tmp_path / "pano_set_out"},
+    )
     assert pcd.returncode == 0, pcd.stderr
     shell = [json.loads(ln[6:]) for ln in pc.stdout.splitlines() if ln.startswith("@meta ")][0]["shell_radius"]
     med = [json.loads(ln[6:]) for ln in pcd.stdout.splitlines() if ln.startswith("@meta ")][0]["median_depth"]

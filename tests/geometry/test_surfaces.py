@@ -3,6 +3,7 @@ normals of an analytic room, depth noise smoothed within a surface and never acr
 project's own path (point_clouds -> the trainers' initial Gaussians) seen from eyes off the centre: a
 wall with a network's per-pixel depth noise stays opaque, and at a box before a wall no Gaussian
 spans the gap between the two."""
+
 import math
 
 import pytest
@@ -20,7 +21,7 @@ from holoflow.splat import render
 
 from .test_layers import BOX, room_with_box  # the analytic box room
 
-HALF = torch.tensor([2.0, 1.5, 2.5], dtype=torch.float64)     # a box room's half sizes (m)
+HALF = torch.tensor([2.0, 1.5, 2.5], dtype=torch.float64)  # a box room's half sizes (m)
 
 
 def box_room_depth(H: int, W: int) -> torch.Tensor:
@@ -32,16 +33,16 @@ def box_room_depth(H: int, W: int) -> torch.Tensor:
 
 def _cov(scales, quats):
     R = quat_to_rotmat(quats)
-    return R @ torch.diag_embed(scales ** 2) @ R.transpose(-1, -2)
+    return R @ torch.diag_embed(scales**2) @ R.transpose(-1, -2)
 
 
 def test_normals_of_a_box_room_are_its_walls():
     H, W = 64, 128
     n = surface_normals(box_room_depth(H, W))
     p = equirect_directions(H, W, dtype=torch.float64) * box_room_depth(H, W)[..., None]
-    wall = (p.abs() / HALF).argmax(-1)                                   # which pair of walls a pixel is on
+    wall = (p.abs() / HALF).argmax(-1)  # which pair of walls a pixel is on
     want = -torch.nn.functional.one_hot(wall, 3).double() * torch.sign(p.gather(-1, wall[..., None]))
-    inner = torch.ones(H, W, dtype=torch.bool)           # farther from the room's edges than the window (2 px)
+    inner = torch.ones(H, W, dtype=torch.bool)  # farther from the room's edges than the window (2 px)
     for dy in range(-3, 4):
         for dx in range(-3, 4):
             inner &= torch.roll(torch.roll(wall, dy, 0), dx, 1) == wall
@@ -52,7 +53,7 @@ def test_normals_of_a_box_room_are_its_walls():
 def test_a_pixel_without_depth_or_neighbours_faces_the_centre():
     d = torch.full((16, 32), 2.0, dtype=torch.float64)
     d[5, 7] = float("nan")
-    d[9, 20] = 1.0                                                        # a lone near pixel
+    d[9, 20] = 1.0  # a lone near pixel
     n = surface_normals(d)
     dirs = equirect_directions(16, 32, dtype=torch.float64)
     assert torch.allclose(n[5, 7], -dirs[5, 7]) and torch.allclose(n[9, 20], -dirs[9, 20])
@@ -65,14 +66,14 @@ def test_smoothing_removes_pixel_noise_and_keeps_edges():
     depth = box_room_depth(H, W)
     near = torch.zeros(H, W, dtype=torch.bool)
     near[100:150, 200:300] = True
-    depth = torch.where(near, 0.6 * depth, depth)                        # a box 40 % nearer
+    depth = torch.where(near, 0.6 * depth, depth)  # a box 40 % nearer
     noisy = depth * torch.exp(0.02 * torch.randn(H, W, generator=g, dtype=torch.float64))
     out = smooth_depth(noisy, 3, 0.05)
     err_in, err_out = (noisy / depth).log().std(), (out / depth).log()
     inner = ~(near ^ torch.roll(near, 4, 1)) & ~(near ^ torch.roll(near, -4, 1))
     inner &= ~(near ^ torch.roll(near, 4, 0)) & ~(near ^ torch.roll(near, -4, 0))
-    assert float(err_out[inner].std()) < 0.35 * float(err_in)            # noise averaged within surfaces
-    assert float(err_out[~inner].abs().max()) < 0.1                       # nothing mixed across the edge
+    assert float(err_out[inner].std()) < 0.35 * float(err_in)  # noise averaged within surfaces
+    assert float(err_out[~inner].abs().max()) < 0.1  # nothing mixed across the edge
     assert torch.equal(smooth_depth(noisy, 0, 0.05), noisy)
 
 
@@ -90,9 +91,15 @@ def test_a_disc_on_a_slanted_surface_covers_its_footprint_there(incidence_deg):
     axis is the surface's, its long axis 1 / cos(incidence) (at most max_stretch) times the short."""
     a = math.radians(incidence_deg)
     ray = torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64)
-    normal = torch.tensor([[0.0, math.sin(a), -math.cos(a)]], dtype=torch.float64)   # turned about east
-    scales, q = surface_footprint(ray, normal, torch.full((1,), 0.01, dtype=torch.float64), torch.full((1,), 0.01, dtype=torch.float64),
-                                  torch.full((1,), 0.001, dtype=torch.float64), max_stretch=6.0)
+    normal = torch.tensor([[0.0, math.sin(a), -math.cos(a)]], dtype=torch.float64)  # turned about east
+    scales, q = surface_footprint(
+        ray,
+        normal,
+        torch.full((1,), 0.01, dtype=torch.float64),
+        torch.full((1,), 0.01, dtype=torch.float64),
+        torch.full((1,), 0.001, dtype=torch.float64),
+        max_stretch=6.0,
+    )
     R = quat_to_rotmat(q)[0]
     assert torch.allclose(R[:, 2], normal[0], atol=1e-9)
     stretch = min(1 / math.cos(a), 6.0)
@@ -106,9 +113,17 @@ def _gaussians(rgb: torch.Tensor, depth: torch.Tensor, pc: PointCloudParams, cfg
     the footprint cloud_footprint builds from pf.json and pf.ply's normals)."""
     result = point_clouds(rgb.float(), depth, pc)
     pf = result.clouds["pf"]
-    footprint = (result.pf["spacing_rad"], cfg.footprint_width, cfg.footprint_thickness, None,
-                 result.pf.get("layer", {}).get("points", 0), result.pf.get("layer", {}).get("spacing_rad", 0.0),
-                 0.0, pf.normals.double() if cfg.footprint_orient == "surface" else None, cfg.footprint_max_stretch)
+    footprint = (
+        result.pf["spacing_rad"],
+        cfg.footprint_width,
+        cfg.footprint_thickness,
+        None,
+        result.pf.get("layer", {}).get("points", 0),
+        result.pf.get("layer", {}).get("spacing_rad", 0.0),
+        0.0,
+        pf.normals.double() if cfg.footprint_orient == "surface" else None,
+        cfg.footprint_max_stretch,
+    )
     return init_model(pf.xyz.numpy(), pf.rgb.numpy(), cfg.init_opacity, footprint=footprint)
 
 
@@ -158,7 +173,7 @@ def test_no_gaussian_spans_the_gap_between_a_box_and_the_wall(edge_radius, stret
     model = _gaussians(rgb.float(), depth, pc, TransferOptParams())
     means = model.means.detach().double()
     ray = means / torch.linalg.vector_norm(means, dim=-1, keepdim=True)
-    behind = (means[:, 0].abs() < 0.5) & (means[:, 1].abs() < 0.7)        # the box's silhouette, widened
+    behind = (means[:, 0].abs() < 0.5) & (means[:, 1].abs() < 0.7)  # the box's silhouette, widened
     gap = behind & (means[:, 2] > BOX[0][2] + 0.05) & (means[:, 2] < 2.9)
     if stretched:
         assert int(gap.sum()) > 10
@@ -180,8 +195,9 @@ def test_a_thin_near_bar_keeps_its_points(sides, whole):
     depth = torch.full((H, W), 3.0, dtype=torch.float64)
     depth[10:50, 60:62] = 1.0
     rgb = torch.full((H, W, 3), 0.5)
-    pc = PointCloudParams(pf_width=W, pf_sampling="grid", layer_baseline=0.0, pf_polar_density=1.0, grad_sides=sides,
-                          sky_dome=False)
+    pc = PointCloudParams(
+        pf_width=W, pf_sampling="grid", layer_baseline=0.0, pf_polar_density=1.0, grad_sides=sides, sky_dome=False
+    )
     xyz = point_clouds(rgb, depth, pc).clouds["pf"].xyz
     on_bar = int((torch.linalg.vector_norm(xyz, dim=-1) < 1.5).sum())
     assert on_bar == (80 if whole else 0)

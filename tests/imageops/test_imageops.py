@@ -1,5 +1,6 @@
 """Classical image operations: colour, wrap padding, Lanczos, lineart, styles, detail — seams, determinism,
 contracts, and lineart as a real structure map of the base panorama."""
+
 import numpy as np
 import pytest
 
@@ -28,7 +29,7 @@ def seam_ok(img: np.ndarray) -> bool:
     """The last -> first column step is no larger than typical neighbouring-column steps (95th pct)."""
     img = np.clip(np.asarray(img, dtype=np.float32), 0.0, 1.0)
     img = img if img.ndim == 3 else img[..., None]
-    steps = np.abs(np.diff(img, axis=1)).mean(axis=(0, 2))                            # [W - 1]
+    steps = np.abs(np.diff(img, axis=1)).mean(axis=(0, 2))  # [W - 1]
     seam = np.abs(img[:, -1] - img[:, 0]).mean()
     return bool(seam <= np.percentile(steps, 95))
 
@@ -55,7 +56,7 @@ def test_pad_and_crop():
     np.testing.assert_array_equal(p[:, :3], img[:, -3:])  # padding and cropping copy: exact on any CPU
     np.testing.assert_array_equal(p[:, -3:], img[:, :3])
     np.testing.assert_array_equal(crop_columns(p, 3), img)
-    assert pad_columns(img, 30).shape == (2, 72)                                       # pad wider than W
+    assert pad_columns(img, 30).shape == (2, 72)  # pad wider than W
 
 
 @pytest.mark.parametrize("size", [(512, 256), (384, 192), (200, 100), (256, 128)])
@@ -64,7 +65,7 @@ def test_lanczos_contract_seam_and_wrap(base, size):
     out = lanczos_resize(rgb, *size)
     assert out.shape == (size[1], size[0], 3) and out.dtype == np.float32
     assert seam_ok(out)
-    if size[0] % 256 == 0 or size[0] == 384:                                          # integer shift maps exactly
+    if size[0] % 256 == 0 or size[0] == 384:  # integer shift maps exactly
         shift = 16
         a = np.roll(out, shift * size[0] // 256, axis=1)
         b = lanczos_resize(np.roll(rgb, shift, axis=1), *size)
@@ -88,11 +89,11 @@ def test_lanczos_fast_path_matches_oiio_reference(size, wrap):
 
 
 def test_lanczos_weights_rows_sum_to_one_and_wrap():
-    w = lanczos_weights(300, 97, True).toarray()                                        # shrink, stretched kernel
+    w = lanczos_weights(300, 97, True).toarray()  # shrink, stretched kernel
     np.testing.assert_allclose(w.sum(1), 1.0, atol=1e-12)
-    assert (w[0, -5:] != 0).any() and (w[-1, :5] != 0).any()                           # the seam's taps wrap
+    assert (w[0, -5:] != 0).any() and (w[-1, :5] != 0).any()  # the seam's taps wrap
     c = lanczos_weights(300, 97, False).toarray()
-    assert (c[0, -5:] == 0).all() and (c[-1, :5] == 0).all()                           # rows: edge repeated
+    assert (c[0, -5:] == 0).all() and (c[-1, :5] == 0).all()  # rows: edge repeated
     np.testing.assert_allclose(lanczos_weights(10, 10, True).toarray(), np.eye(10), atol=1e-12)  # same size
 
 
@@ -150,7 +151,7 @@ def test_styles_contract_seam_determinism(base, style):
     # same call, same inputs, same process: one code path, so bit-equal on any CPU
     np.testing.assert_array_equal(stylize(rgb, lines, style), out)
     assert roll_error(lambda x: stylize(x, lineart(x), style), rgb, 64) < 0.01
-    assert np.abs(out - np.clip(rgb, 0, 1)).mean() > 0.005                             # it does something
+    assert np.abs(out - np.clip(rgb, 0, 1)).mean() > 0.005  # it does something
 
 
 def test_styles_keep_the_lineart_geometry(base):
@@ -183,7 +184,7 @@ def test_detail_enhancement(base):
         g = linear_to_srgb(np.clip(x, 0, 1)).mean(2)
         return np.abs(g - cv2.GaussianBlur(g, (0, 0), 2.0)).mean()
 
-    assert high(out) > 1.2 * high(rgb)                                                  # more fine detail
+    assert high(out) > 1.2 * high(rgb)  # more fine detail
     assert abs(float(linear_to_srgb(np.clip(out, 0, 1)).mean() - linear_to_srgb(np.clip(rgb, 0, 1)).mean())) < 0.02
     with pytest.raises(ValueError):
         enhance_detail(rgb, -1.0)

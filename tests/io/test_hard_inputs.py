@@ -2,6 +2,7 @@
 damaged and non-image files. Each either imports (repaired by the stated rule, said in the run's output and
 the run record) with every artifact finite, +inf only in a depth channel (sky), or is refused in one line
 with the store still usable (docs/hard-inputs.md)."""
+
 from __future__ import annotations
 
 import json
@@ -42,8 +43,23 @@ def _exr(path: Path, rgb: np.ndarray, **extra) -> Path:
 
 
 def _run(store: Path, src: Path, *extra: str) -> subprocess.CompletedProcess:
-    cmd = [sys.executable, "-m", "holoflow", "run", "a room", "--pipeline", str(ROOT / "pipeline.yaml"),
-           "--profile", "tiny", "--store", str(store), "--use", f"base_pano={src}", "--json", *extra]
+    cmd = [
+        sys.executable,
+        "-m",
+        "holoflow",
+        "run",
+        "a room",
+        "--pipeline",
+        str(ROOT / "pipeline.yaml"),
+        "--profile",
+        "tiny",
+        "--store",
+        str(store),
+        "--use",
+        f"base_pano={src}",
+        "--json",
+        *extra,
+    ]
     return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
 
 
@@ -60,18 +76,21 @@ def _non_finite(run_dir: Path) -> list[str]:
                     bad.append(f"{f.relative_to(run_dir)}:{name}")
         elif f.suffix == ".ply":
             for el in PlyData.read(str(f)).elements:
-                bad += [f"{f.relative_to(run_dir)}:{n}" for n in el.data.dtype.names
-                        if el.data[n].dtype.kind == "f" and not np.isfinite(el.data[n]).all()]
+                bad += [
+                    f"{f.relative_to(run_dir)}:{n}"
+                    for n in el.data.dtype.names
+                    if el.data[n].dtype.kind == "f" and not np.isfinite(el.data[n]).all()
+                ]
     return bad
 
 
 def _nan_inf_negative() -> np.ndarray:
     rgb = _pano()
     rng = np.random.default_rng(0)
-    rgb[rng.random(rgb.shape[:2]) < 0.006] = np.nan           # 0.6 % NaN pixels (the issue's file)
+    rgb[rng.random(rgb.shape[:2]) < 0.006] = np.nan  # 0.6 % NaN pixels (the issue's file)
     rgb[3, 5:9] = np.inf
     rgb[4, 5:7] = -np.inf
-    rgb[40:42] = -0.25                                        # negative rows
+    rgb[40:42] = -0.25  # negative rows
     return rgb
 
 
@@ -99,12 +118,12 @@ def test_odd_but_usable_files_import_finite(tmp_path, case):
     """Accepted files: the imported panorama and the colour and depth stages after it are finite."""
     rgb = _pano()
     if case == "huge":
-        rgb[10:12] = 3e38                                      # near float32 max: squares overflow
+        rgb[10:12] = 3e38  # near float32 max: squares overflow
         src = _exr(tmp_path / "huge.exr", rgb)
     elif case == "z_bad":
         z = np.full((H, W), 3.0, np.float32)
-        z[:4] = np.inf                                         # sky: fine
-        z[10, :8], z[20, :8], z[30, :8] = np.nan, -1.0, 0.0     # not: the Z channel is dropped
+        z[:4] = np.inf  # sky: fine
+        z[10, :8], z[20, :8], z[30, :8] = np.nan, -1.0, 0.0  # not: the Z channel is dropped
         src = _exr(tmp_path / "z.exr", rgb, Z=z)
     elif case == "grey_png":
         src = _write_image(tmp_path / "grey.png", (rgb[..., 0] * 255).astype(np.uint8), "uint8")
@@ -114,7 +133,7 @@ def test_odd_but_usable_files_import_finite(tmp_path, case):
     elif case == "png16":
         src = _write_image(tmp_path / "p16.png", (rgb * 65535).astype(np.uint16), "uint16")
     else:
-        rgb[5, 5] = np.nan                                     # a float TIFF keeps NaN (RGBE .hdr cannot)
+        rgb[5, 5] = np.nan  # a float TIFF keeps NaN (RGBE .hdr cannot)
         src = _write_image(tmp_path / "p.tif", rgb, "float")
     done = _run(tmp_path / "store", src, "--until", "metric_align")
     assert done.returncode == 0, done.stderr[-2000:]
@@ -169,8 +188,13 @@ def test_refused_files_fail_in_one_line_and_leave_the_store_usable(tmp_path):
         assert done.returncode != 0, case
         lines = [ln for ln in done.stderr.strip().splitlines() if ln.strip()]
         assert len(lines) == 1 and words in lines[0] and "fix:" in lines[0], (case, done.stderr)
-    verify = subprocess.run([sys.executable, "-m", "holoflow", "verify", "--store", str(store)], cwd=ROOT,
-                            capture_output=True, text=True, timeout=120)
+    verify = subprocess.run(
+        [sys.executable, "-m", "holoflow", "verify", "--store", str(store)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert verify.returncode == 0, verify.stdout + verify.stderr
     good = _run(store, _exr(tmp_path / "good.exr", _pano()), "--until", "stylize")
     assert good.returncode == 0, good.stderr[-2000:]
@@ -192,19 +216,29 @@ def test_a_stage_writing_nan_fails_at_that_stage_in_one_line(tmp_path):
         "    y[1, 2] = np.nan if job.params.get('nan') else 0.0\n"
         "    write_exr(job.output('x.exr'), {'Y': y})\n"
         "    return 0\n"
-        "run_main(main, 'nan_stage')\n")
+        "run_main(main, 'nan_stage')\n"
+    )
     for nan, code in ((False, 0), (True, 1)):
         job = tmp_path / f"job{nan}.json"
         out = tmp_path / f"out{nan}"
-        job.write_text(json.dumps({"stage": "nan_stage", "engine": "x", "params": {"nan": nan},
-                                   "output_dir": str(out)}))
+        job.write_text(
+            json.dumps({"stage": "nan_stage", "engine": "x", "params": {"nan": nan}, "output_dir": str(out)})
+        )
         out.mkdir()
-        done = subprocess.run([sys.executable, str(prog), str(job)], cwd=ROOT, capture_output=True, text=True,
-                              timeout=120, env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+        done = subprocess.run(
+            [sys.executable, str(prog), str(job)],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env={**__import__("os").environ, "PYTHONPATH": str(ROOT)},
+        )
         assert done.returncode == code, done.stderr
         if nan:
-            assert done.stderr.strip() == ("nan_stage: non-finite output, nothing committed: x.exr: channel Y has "
-                                           "1 NaN, 0 +inf, 0 -inf of 8 values (docs/hard-inputs.md)")
+            assert done.stderr.strip() == (
+                "nan_stage: non-finite output, nothing committed: x.exr: channel Y has "
+                "1 NaN, 0 +inf, 0 -inf of 8 values (docs/hard-inputs.md)"
+            )
 
 
 @pytest.mark.parametrize("fmt", ["uint8", "uint16"])

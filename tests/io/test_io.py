@@ -9,8 +9,14 @@ def test_exr_round_trip_bit_exact_with_nan_inf_and_attrs(tmp_path):
     rng = np.random.default_rng(0)
     z = rng.random((5, 7), dtype=np.float32) * 10
     z[0, 0], z[1, 1], z[2, 2], z[3, 3] = np.nan, np.inf, -np.inf, -0.0
-    attrs = {"holoflow.stage": "base_pano", "holoflow.depth_kind": "radial", "n": 3, "f": 0.25,
-             "grid": [8, 7], "flag": True}
+    attrs = {
+        "holoflow.stage": "base_pano",
+        "holoflow.depth_kind": "radial",
+        "n": 3,
+        "f": 0.25,
+        "grid": [8, 7],
+        "flag": True,
+    }
     write_exr(tmp_path / "a.exr", {"Z": z, "mask": (z > 5).astype(np.float32)}, attrs)
     channels, back = read_exr(tmp_path / "a.exr")
     assert channels["Z"].tobytes() == z.tobytes()
@@ -81,7 +87,7 @@ def test_radial_depth_is_read_and_other_depth_kinds_are_refused(tmp_path):
     write_exr(tmp_path / "disp.exr", {"Z": z}, {"holoflow.depth_kind": "disparity"})
     write_exr(tmp_path / "noz.exr", {"Y": z})
     assert read_radial_depth(tmp_path / "radial.exr").tobytes() == z.tobytes()
-    assert read_radial_depth(tmp_path / "unset.exr").tobytes() == z.tobytes()      # unset reads as radial
+    assert read_radial_depth(tmp_path / "unset.exr").tobytes() == z.tobytes()  # unset reads as radial
     for name in ("disp.exr", "noz.exr"):
         with pytest.raises(ExrError, match="no radial depth in channel Z"):
             read_radial_depth(tmp_path / name)

@@ -1,5 +1,6 @@
 """Fixtures for the real-model engine tests: tiny random models of the real architectures,
 saved to a temp dir once per session and loaded through each engine's own loading code."""
+
 import os
 
 import numpy as np

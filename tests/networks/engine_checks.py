@@ -1,4 +1,5 @@
 """Checks shared by the engine tests."""
+
 import numpy as np
 
 
@@ -9,7 +10,7 @@ def seam_rank(img: np.ndarray) -> float:
     A seamless panorama's seam is an ordinary column: its rank is uniform in [0, 1] over seeds
     (mean 0.5); an unblended seam is the largest step (rank 1).
     """
-    steps = np.abs(img - np.roll(img, 1, axis=1)).mean(axis=(0, 2))   # [W], steps[0] = seam
+    steps = np.abs(img - np.roll(img, 1, axis=1)).mean(axis=(0, 2))  # [W], steps[0] = seam
     return float((steps[1:] < steps[0]).mean())
 
 

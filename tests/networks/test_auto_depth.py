@@ -3,6 +3,7 @@ out as huggingface_hub lays it out, `--models DIR`, a path), the layout engine o
 panorama's own Z kept as its depth; `holoflow models pull` / `list`. Tiny random Depth Anything models
 written here; nothing is downloaded (the one network call, snapshot_download, is replaced where a
 download is simulated, and made to fail for real with HF_HUB_OFFLINE=1)."""
+
 import json
 import os
 import subprocess
@@ -52,8 +53,9 @@ def holoflow(*args, hf_home: Path, offline: bool = True) -> subprocess.Completed
     env.pop("HF_HUB_CACHE", None)
     if offline:
         env["HF_HUB_OFFLINE"] = "1"
-    return subprocess.run([sys.executable, "-m", "holoflow", *args], cwd=ROOT, capture_output=True, text=True,
-                          timeout=600, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "holoflow", *args], cwd=ROOT, capture_output=True, text=True, timeout=600, env=env
+    )
 
 
 def step_meta(store: Path, stage: str) -> dict:
@@ -66,10 +68,11 @@ def step_meta(store: Path, stage: str) -> dict:
 
 # -- the rule --------------------------------------------------------------------------------------
 
+
 def test_resolve_engine_rule():
     from holoflow.depth.engines import resolve_engine
 
-    assert resolve_engine("auto", True)[0] == "simulated"                        # library callers (bench)
+    assert resolve_engine("auto", True)[0] == "simulated"  # library callers (bench)
     assert resolve_engine("auto", True, source="procedural", network="/w")[0] == "simulated"
     assert resolve_engine("auto", True, source="given", network="/w")[0] == "given"
     assert resolve_engine("auto", True, source="given", metric=True)[0] == "given"
@@ -87,13 +90,12 @@ def test_truth_source_reads_the_header(tmp_path):
     from holoflow.io.exr import write_rgb
 
     rgb, z = np.full((8, 16, 3), 0.5, np.float32), np.full((8, 16), 2.0, np.float32)
-    for name, attrs, extra, want in [("proc", {"holoflow.stage": "base_pano", "holoflow.engine": "procedural"},
-                                      {"Z": z}, "procedural"),
-                                     ("user", {}, {"Z": z}, "given"),
-                                     ("diff", {"holoflow.stage": "base_pano", "holoflow.engine": "diffusion360"},
-                                      {"Z": z}, "given"),
-                                     ("noz", {"holoflow.stage": "base_pano", "holoflow.engine": "procedural"}, {},
-                                      None)]:
+    for name, attrs, extra, want in [
+        ("proc", {"holoflow.stage": "base_pano", "holoflow.engine": "procedural"}, {"Z": z}, "procedural"),
+        ("user", {}, {"Z": z}, "given"),
+        ("diff", {"holoflow.stage": "base_pano", "holoflow.engine": "diffusion360"}, {"Z": z}, "given"),
+        ("noz", {"holoflow.stage": "base_pano", "holoflow.engine": "procedural"}, {}, None),
+    ]:
         (tmp_path / name).mkdir()
         write_rgb(tmp_path / name / "pano.exr", rgb, attrs, **extra)
         assert truth_source(tmp_path / name) == want, name
@@ -101,6 +103,7 @@ def test_truth_source_reads_the_header(tmp_path):
 
 
 # -- the network through the common rules ------------------------------------------------------------
+
 
 def test_network_depth_goes_through_alignment_blending_and_metric_rules(tiny_da):
     """The tiny network's faces are the engine's raw output, aligned and blended like any engine's
@@ -113,17 +116,19 @@ def test_network_depth_goes_through_alignment_blending_and_metric_rules(tiny_da)
     pano = np.stack([0.2 + 0.1 * np.sin(u / 5), 0.3 + 0.4 * (v < 12), 0.9 * (v < 12) + 0.2], -1).astype(np.float32)
     cfg = TangentDepthParams(width=64, face_size=28, grid=(2, 2), model=str(tiny_da))
     res = pd.estimate_disparity(pano, None, "depth_anything", cfg)
-    faces = pd.sample_faces(pano, pd._np(pd.icosahedron_faces(28, cfg.padding).K),
-                            pd._np(pd.icosahedron_faces(28, cfg.padding).viewmat), 28).astype(np.float32)
+    faces = pd.sample_faces(
+        pano, pd._np(pd.icosahedron_faces(28, cfg.padding).K), pd._np(pd.icosahedron_faces(28, cfg.padding).viewmat), 28
+    ).astype(np.float32)
     assert np.array_equal(res.raw, relative_disparity(faces, str(tiny_da), side=28))
     assert res.engine["engine"] == "depth_anything" and res.engine["net_side"] == 28
     assert res.disparity.shape == (32, 64) and np.isfinite(res.disparity).all()
     ok = res.alignment.face_ok
     assert np.isnan(res.aligned[~ok]).all() and np.isfinite(res.aligned[ok]).any()
     try:
-        metric = pd.metric_from_disparity(res.disparity, pano, None, "layout",
-                                          MetricAlignParams(faces=6, face_size=16, scene="outdoor"))
-    except ValueError as e:      # a random network may anti-correlate with the layout: refused, in one line
+        metric = pd.metric_from_disparity(
+            res.disparity, pano, None, "layout", MetricAlignParams(faces=6, face_size=16, scene="outdoor")
+        )
+    except ValueError as e:  # a random network may anti-correlate with the layout: refused, in one line
         assert "non-positive scale" in str(e)
         return
     d = metric.depth
@@ -132,22 +137,39 @@ def test_network_depth_goes_through_alignment_blending_and_metric_rules(tiny_da)
 
 # -- a photo: network when the weights are here, layout and how to get it otherwise --------------------
 
+
 def test_photo_run_picks_the_network_from_the_hf_cache_and_layout_without(tiny_da, room_jpg, tmp_path):
     hf = hf_cache_with(tiny_da, tmp_path / "hf")
     store = tmp_path / "store"
-    args = ("run", "a room", "--use", f"base_pano={room_jpg}", "--profile", "tiny", "--until", "tangent_depth",
-            "--store", str(store))
+    args = (
+        "run",
+        "a room",
+        "--use",
+        f"base_pano={room_jpg}",
+        "--profile",
+        "tiny",
+        "--until",
+        "tangent_depth",
+        "--store",
+        str(store),
+    )
     done = holoflow(*args, hf_home=hf)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert "tangent_depth: ran" in done.stdout and "engine depth_anything (auto: relative depth from the network" \
-        in done.stdout and "V2 Small" in done.stdout
+    assert (
+        "tangent_depth: ran" in done.stdout
+        and "engine depth_anything (auto: relative depth from the network" in done.stdout
+        and "V2 Small" in done.stdout
+    )
     meta = step_meta(store, "tangent_depth")
     assert meta["engine"]["engine"] == "depth_anything" and REPO.replace("/", "--") in meta["engine"]["model"]
 
     empty = holoflow(*args, hf_home=tmp_path / "empty")
     assert empty.returncode == 0, empty.stderr[-2000:]
-    assert "engine layout (auto: no truth depth and no depth network" in empty.stdout and "holoflow models pull" in empty.stdout
-    assert step_meta(store, "tangent_depth")["engine"]["engine"] == "layout"   # a new key: not the cached network
+    assert (
+        "engine layout (auto: no truth depth and no depth network" in empty.stdout
+        and "holoflow models pull" in empty.stdout
+    )
+    assert step_meta(store, "tangent_depth")["engine"]["engine"] == "layout"  # a new key: not the cached network
 
 
 def test_models_dir_and_explicit_path_feed_auto(tiny_da, tmp_path):
@@ -160,19 +182,32 @@ def test_models_dir_and_explicit_path_feed_auto(tiny_da, tmp_path):
     r = pipeline.resolve(pipe, "preview")
     apply_manifest(r, tmp_path / "m")
     assert r["tangent_depth"].params["model"] == str(tiny_da) and r["metric_align"].params["model"] == ""
-    assert not needs(pipeline.resolve(pipe, "preview"))     # an auto network is listed only when asked for
+    assert not needs(pipeline.resolve(pipe, "preview"))  # an auto network is listed only when asked for
     need = [n for n in needs(r) if n.stage == "tangent_depth"]
-    assert need[0].present and need[0].engine == "auto -> depth_anything" and need[0].about == ""   # a folder
+    assert need[0].present and need[0].engine == "auto -> depth_anything" and need[0].about == ""  # a folder
 
 
 def test_auto_with_a_missing_explicit_model_stops_before_running(room_jpg, tmp_path):
-    done = holoflow("run", "a room", "--use", f"base_pano={room_jpg}", "--profile", "tiny", "--until",
-                    "tangent_depth", "--set", "tangent_depth.model=/nowhere/da", "--store", str(tmp_path / "s"),
-                    hf_home=tmp_path / "hf")
+    done = holoflow(
+        "run",
+        "a room",
+        "--use",
+        f"base_pano={room_jpg}",
+        "--profile",
+        "tiny",
+        "--until",
+        "tangent_depth",
+        "--set",
+        "tangent_depth.model=/nowhere/da",
+        "--store",
+        str(tmp_path / "s"),
+        hf_home=tmp_path / "hf",
+    )
     assert done.returncode != 0 and "not found locally" in done.stderr and "tangent_depth.model" in done.stderr
 
 
 # -- a panorama with its own depth --------------------------------------------------------------------
+
 
 def test_imported_z_is_kept_as_the_depth_and_a_replaced_z_changes_it(tmp_path):
     from holoflow.depth.panorama import resize_radial
@@ -185,8 +220,19 @@ def test_imported_z_is_kept_as_the_depth_and_a_replaced_z_changes_it(tmp_path):
     for name, z in depths.items():
         write_rgb(tmp_path / f"{name}.exr", rgb, {}, Z=z.astype(np.float32))
         store = tmp_path / f"store_{name}"
-        done = holoflow("run", "a room", "--use", f"base_pano={tmp_path / f'{name}.exr'}", "--profile", "tiny",
-                        "--until", "metric_align", "--store", str(store), hf_home=tmp_path / "hf")
+        done = holoflow(
+            "run",
+            "a room",
+            "--use",
+            f"base_pano={tmp_path / f'{name}.exr'}",
+            "--profile",
+            "tiny",
+            "--until",
+            "metric_align",
+            "--store",
+            str(store),
+            hf_home=tmp_path / "hf",
+        )
         assert done.returncode == 0, done.stderr[-2000:]
         assert "engine given (auto: the imported panorama has a Z channel" in done.stdout
         meta = step_meta(store, "metric_align")
@@ -203,10 +249,11 @@ def test_imported_z_is_kept_as_the_depth_and_a_replaced_z_changes_it(tmp_path):
 
 # -- pull and list ------------------------------------------------------------------------------------
 
+
 def test_pull_help_and_offline_line(tmp_path):
     helped = holoflow("models", "pull", "--help", hf_home=tmp_path / "hf")
     assert helped.returncode == 0 and "--profile" in helped.stdout and "huggingface_hub" in helped.stdout
-    done = holoflow("models", "pull", hf_home=tmp_path / "hf")          # HF_HUB_OFFLINE=1: the real call refuses
+    done = holoflow("models", "pull", hf_home=tmp_path / "hf")  # HF_HUB_OFFLINE=1: the real call refuses
     assert done.returncode == 1
     lines = done.stderr.strip().splitlines()
     assert "cannot reach the Hugging Face Hub for depth-anything/Depth-Anything-V2-Small-hf" in lines[-1]
@@ -225,8 +272,9 @@ def test_pull_offline_error_is_one_line(monkeypatch, capsys):
     monkeypatch.setattr(huggingface_hub, "snapshot_download", offline)
     assert main(["pull", "zoedepth"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert "cannot reach the Hugging Face Hub for Intel/zoedepth-nyu-kitti (offline: LocalEntryNotFoundError)" \
-        in err[-1]
+    assert (
+        "cannot reach the Hugging Face Hub for Intel/zoedepth-nyu-kitti (offline: LocalEntryNotFoundError)" in err[-1]
+    )
 
 
 def test_pull_then_list_shows_it_present(tiny_da, tmp_path, monkeypatch, capsys):
@@ -242,7 +290,7 @@ def test_pull_then_list_shows_it_present(tiny_da, tmp_path, monkeypatch, capsys)
     calls, real = [], huggingface_hub.snapshot_download
 
     def download(repo_id, allow_patterns=None, local_files_only=False, **kw):
-        if local_files_only:                      # a lookup (list, runs): the real code, untouched
+        if local_files_only:  # a lookup (list, runs): the real code, untouched
             return real(repo_id, allow_patterns=allow_patterns, local_files_only=True, **kw)
         calls.append((repo_id, allow_patterns))
         return str(place_in_hf_cache(tiny_da, repo_id, tmp_path / "hub", revision="a" * 40))
@@ -261,7 +309,7 @@ def test_pull_then_list_shows_it_present(tiny_da, tmp_path, monkeypatch, capsys)
     assert calls[-1] == ("archerfmy0831/sd-t2i-360panoimage", ["sr-base", "sr-base/*"])
     assert main(["pull", "lama"]) == 1 and "not a Hugging Face model id" in capsys.readouterr().err
     calls.clear()
-    assert main(["pull", "--profile", "paper"]) == 0       # every HF model the paper loads; lama skipped
+    assert main(["pull", "--profile", "paper"]) == 0  # every HF model the paper loads; lama skipped
     assert "skipping lama" in capsys.readouterr().err and ("Intel/zoedepth-nyu-kitti", None) in calls
     assert ("archerfmy0831/sd-t2i-360panoimage", ["sd-base", "sd-base/*"]) in calls
 

@@ -1,4 +1,5 @@
 """Engine helpers: the clipped colour transfer networks take, and the wrap-aware resize."""
+
 import numpy as np
 import pytest
 import torch
@@ -14,8 +15,12 @@ def test_srgb_round_trip_clipped_as_networks_take_it():
     assert np.allclose(srgb_to_linear(linear_to_srgb(x, clip=True), clip=True), x, atol=1e-6)
     assert abs(float(linear_to_srgb(np.float32(0.18), clip=True)) - 0.4614) < 1e-3
     over = np.array([-0.5, 1.0, 4.0], dtype=np.float32)
-    assert linear_to_srgb(over, clip=True).tolist() == [0.0, linear_to_srgb(np.float32(1.0)).item(), linear_to_srgb(np.float32(1.0)).item()]
-    assert linear_to_srgb(over)[2] > 1.5                                 # unclipped: values above 1 pass the curve
+    assert linear_to_srgb(over, clip=True).tolist() == [
+        0.0,
+        linear_to_srgb(np.float32(1.0)).item(),
+        linear_to_srgb(np.float32(1.0)).item(),
+    ]
+    assert linear_to_srgb(over)[2] > 1.5  # unclipped: values above 1 pass the curve
 
 
 @pytest.mark.parametrize("w_in,w_out,shift_in,shift_out", [(128, 100, 32, 25), (32, 128, 1, 4), (64, 48, 4, 3)])

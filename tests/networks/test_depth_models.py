@@ -1,5 +1,6 @@
 """Depth engines: tiny Depth Anything and ZoeDepth (real transformers architectures), saved with
 save_pretrained and loaded through the engines' own from_pretrained path."""
+
 import numpy as np
 import pytest
 
@@ -31,8 +32,9 @@ def test_depth_anything_contract(tiny_depth_anything, images):
     from holoflow.networks.depth_anything import relative_disparity
 
     calls = []
-    disp = relative_disparity(images, model=str(tiny_depth_anything), batch=2,
-                              progress=lambda d, t, w: calls.append((d, t)))
+    disp = relative_disparity(
+        images, model=str(tiny_depth_anything), batch=2, progress=lambda d, t, w: calls.append((d, t))
+    )
     assert disp.shape == (3, 24, 40) and disp.dtype == np.float32 and np.isfinite(disp).all()
     assert disp.std() > 0 and calls[-1] == (3, 3)
     # same call, same inputs, same process: one code path, so bit-equal on any CPU
@@ -57,7 +59,7 @@ def test_zoedepth_padding_removal():
 
     h, w = 24, 40
     ph, pw = int(np.sqrt(h / 2) * 3), int(np.sqrt(w / 2) * 3)
-    canvas = torch.arange(w + 2 * pw, dtype=torch.float32).repeat(h + 2 * ph, 1)[None] + 1   # [1, H', W']
+    canvas = torch.arange(w + 2 * pw, dtype=torch.float32).repeat(h + 2 * ph, 1)[None] + 1  # [1, H', W']
     out = remove_padding(canvas, h, w, padded=True)
     assert out.shape == (1, h, w)
     assert torch.allclose(out[0, 0], torch.arange(pw, pw + w, dtype=torch.float32) + 1, atol=1e-3)

@@ -1,6 +1,7 @@
 """Diffusion engines (base_pano, stylize, detail) on a tiny random SD 1.x + ControlNet saved with
 save_pretrained: the same from_pretrained path as real weights. Circular blending is checked on
 its own (exact properties) and through each engine (seam no larger than neighbouring columns)."""
+
 import numpy as np
 import pytest
 import torch
@@ -14,7 +15,7 @@ pytest.importorskip("diffusers")
 
 
 def test_overlap_columns():
-    assert overlap_columns(128) == 8                       # 1024 px / 8: 8 latent cols = 22.5 deg
+    assert overlap_columns(128) == 8  # 1024 px / 8: 8 latent cols = 22.5 deg
     assert overlap_columns(192) == 16
     for w in (4, 8, 32, 100, 128, 192):
         k = overlap_columns(w)
@@ -25,11 +26,11 @@ def test_blend_overlap_makes_copies_equal_and_crossfades():
     x = torch.randn(1, 4, 3, 10 + 4, generator=torch.Generator().manual_seed(0))
     before = x.clone()
     blend_overlap(x, 4)
-    assert torch.equal(x[..., :4], x[..., 10:])            # the two copies are one again (one value written twice)
-    assert torch.equal(x[..., 4:10], before[..., 4:10])    # nothing else is touched
+    assert torch.equal(x[..., :4], x[..., 10:])  # the two copies are one again (one value written twice)
+    assert torch.equal(x[..., 4:10], before[..., 4:10])  # nothing else is touched
     t = (torch.arange(4) + 0.5) / 4
     assert torch.allclose(x[..., :4], (1 - t) * before[..., 10:] + t * before[..., :4])
-    y = extend_periodic(torch.randn(1, 4, 3, 10), 4)       # already periodic: blending changes nothing
+    y = extend_periodic(torch.randn(1, 4, 3, 10), 4)  # already periodic: blending changes nothing
     assert torch.allclose(blend_overlap(y.clone(), 4), y, atol=1e-6)
 
 
@@ -60,8 +61,15 @@ def test_generate_pano(tiny_sd):
     from holoflow.networks.diffusion360 import generate_pano
 
     steps = []
-    a = generate_pano("a wooden cabin", 64, 32, steps=2, seed=0, model=str(tiny_sd[0]),
-                      progress=lambda d, t, what: steps.append((d, t)))
+    a = generate_pano(
+        "a wooden cabin",
+        64,
+        32,
+        steps=2,
+        seed=0,
+        model=str(tiny_sd[0]),
+        progress=lambda d, t, what: steps.append((d, t)),
+    )
     _check_pano(a)
     assert steps[-1] == (2, 2)
     # same call, same inputs, same process: one code path, so bit-equal on any CPU
@@ -84,15 +92,21 @@ def test_stylize(tiny_sd, base_image):
     line = np.zeros(base_image.shape[:2], np.float32)
     line[:, ::8] = 1
     line[10] = 1
-    a = stylize(base_image, line, "watercolor", 64, 32, steps=2, strength=1.0, seed=0, model=str(sd),
-                controlnet=str(cnet))
+    a = stylize(
+        base_image, line, "watercolor", 64, 32, steps=2, strength=1.0, seed=0, model=str(sd), controlnet=str(cnet)
+    )
     _check_pano(a)
     # same call, same inputs, same process: one code path, so bit-equal on any CPU
-    assert np.array_equal(a, stylize(base_image, line, "watercolor", 64, 32, steps=2, strength=1.0, seed=0,
-                                     model=str(sd), controlnet=str(cnet)))
-    other = stylize(base_image, 1 - line, "watercolor", 64, 32, steps=2, strength=1.0, seed=0,
-                    model=str(sd), controlnet=str(cnet))
-    assert not np.array_equal(a, other)                    # the control image is really used
+    assert np.array_equal(
+        a,
+        stylize(
+            base_image, line, "watercolor", 64, 32, steps=2, strength=1.0, seed=0, model=str(sd), controlnet=str(cnet)
+        ),
+    )
+    other = stylize(
+        base_image, 1 - line, "watercolor", 64, 32, steps=2, strength=1.0, seed=0, model=str(sd), controlnet=str(cnet)
+    )
+    assert not np.array_equal(a, other)  # the control image is really used
     assert seam_is_typical(a, other)
 
 
@@ -100,24 +114,86 @@ def test_refine(tiny_sd, base_image):
     from holoflow.networks.controlnet_tile import refine, tile_grid
 
     xs, ys, tw, th = tile_grid(64, 32, 32, 8)
-    assert len(xs) >= 2 and xs[0] == 0 and xs[-1] + tw > 64   # a tile runs across the seam
+    assert len(xs) >= 2 and xs[0] == 0 and xs[-1] + tw > 64  # a tile runs across the seam
     sd, cnet = tiny_sd
-    a = refine(base_image, "detailed", 64, 32, strength=0.5, tile=32, overlap=8, steps=2, seed=0,
-               model=str(sd), controlnet=str(cnet))
+    a = refine(
+        base_image,
+        "detailed",
+        64,
+        32,
+        strength=0.5,
+        tile=32,
+        overlap=8,
+        steps=2,
+        seed=0,
+        model=str(sd),
+        controlnet=str(cnet),
+    )
     _check_pano(a)
     # same call, same inputs, same process: one code path, so bit-equal on any CPU
-    assert np.array_equal(a, refine(base_image, "detailed", 64, 32, strength=0.5, tile=32, overlap=8, steps=2,
-                                    seed=0, model=str(sd), controlnet=str(cnet)))
-    others = [refine(base_image, "detailed", 64, 32, strength=0.5, tile=32, overlap=8, steps=2, seed=s,
-                     model=str(sd), controlnet=str(cnet)) for s in (1, 2)]
+    assert np.array_equal(
+        a,
+        refine(
+            base_image,
+            "detailed",
+            64,
+            32,
+            strength=0.5,
+            tile=32,
+            overlap=8,
+            steps=2,
+            seed=0,
+            model=str(sd),
+            controlnet=str(cnet),
+        ),
+    )
+    others = [
+        refine(
+            base_image,
+            "detailed",
+            64,
+            32,
+            strength=0.5,
+            tile=32,
+            overlap=8,
+            steps=2,
+            seed=s,
+            model=str(sd),
+            controlnet=str(cnet),
+        )
+        for s in (1, 2)
+    ]
     assert seam_is_typical(a, *others)
-    batched = refine(base_image, "detailed", 64, 32, strength=0.5, tile=32, overlap=8, steps=2, seed=0,
-                     model=str(sd), controlnet=str(cnet), batch=3)  # 3 tiles, then the rest
-    assert np.abs(batched - a).max() < 1e-4                # each tile keeps its seed; rounding only
+    batched = refine(
+        base_image,
+        "detailed",
+        64,
+        32,
+        strength=0.5,
+        tile=32,
+        overlap=8,
+        steps=2,
+        seed=0,
+        model=str(sd),
+        controlnet=str(cnet),
+        batch=3,
+    )  # 3 tiles, then the rest
+    assert np.abs(batched - a).max() < 1e-4  # each tile keeps its seed; rounding only
     assert np.abs(others[0] - a).max() > 1e-2
-    same = refine(base_image, "detailed", 64, 32, strength=0.0, tile=32, overlap=8, steps=2, seed=0,
-                  model="/nonexistent", controlnet="/nonexistent")
-    assert np.allclose(same, base_image, atol=1e-5)        # strength 0: no model needed, input back
+    same = refine(
+        base_image,
+        "detailed",
+        64,
+        32,
+        strength=0.0,
+        tile=32,
+        overlap=8,
+        steps=2,
+        seed=0,
+        model="/nonexistent",
+        controlnet="/nonexistent",
+    )
+    assert np.allclose(same, base_image, atol=1e-5)  # strength 0: no model needed, input back
 
 
 def test_missing_diffusion_weights(tmp_path, base_image):

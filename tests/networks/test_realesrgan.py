@@ -1,4 +1,5 @@
 """Real-ESRGAN engine: official key names, x2/x4 from the weights, wrap padding, exact output size."""
+
 import numpy as np
 import pytest
 import torch
@@ -16,10 +17,10 @@ def _save(tmp_path, scale, fmt):
     torch.manual_seed(scale)
     net = rrdbnet_class()(scale=scale, num_feat=8, num_block=1, num_grow_ch=4)
     for p in net.parameters():
-        p.data.mul_(3.0)                                   # make the random net visibly non-trivial
+        p.data.mul_(3.0)  # make the random net visibly non-trivial
     path = tmp_path / f"tiny_x{scale}.{fmt}"
     if fmt == "pth":
-        torch.save({"params_ema": net.state_dict()}, path)     # the official checkpoints' layout
+        torch.save({"params_ema": net.state_dict()}, path)  # the official checkpoints' layout
     else:
         from safetensors.torch import save_file
 
@@ -29,8 +30,15 @@ def _save(tmp_path, scale, fmt):
 
 def test_official_key_names():
     keys = set(rrdbnet_class()(scale=4, num_feat=8, num_block=2, num_grow_ch=4).state_dict())
-    for k in ("conv_first.weight", "body.1.rdb3.conv5.bias", "conv_body.weight", "conv_up1.weight",
-              "conv_up2.weight", "conv_hr.weight", "conv_last.bias"):
+    for k in (
+        "conv_first.weight",
+        "body.1.rdb3.conv5.bias",
+        "conv_body.weight",
+        "conv_up1.weight",
+        "conv_up2.weight",
+        "conv_hr.weight",
+        "conv_last.bias",
+    ):
         assert k in keys
 
 
@@ -47,14 +55,14 @@ def test_architecture_read_from_weights(tmp_path, scale, fmt):
 def test_upscale_contract(tmp_path, base_image, scale, fmt, size):
     """One pass (x2: 32 -> 64 px wide, then resized to 60; x4: 32 -> 128), tiled."""
     path = _save(tmp_path, scale, fmt)
-    small = base_image[::2, ::2]                                          # [16, 32, 3]
-    tile = 24 if scale == 2 else 64                                       # x2: several tiles
+    small = base_image[::2, ::2]  # [16, 32, 3]
+    tile = 24 if scale == 2 else 64  # x2: several tiles
     out = upscale(small, size[1], size[0], model=str(path), tile=tile)
     assert out.shape == (*size, 3) and out.dtype == np.float32
     assert np.isfinite(out).all() and out.min() >= 0 and out.max() <= 1
     # same call, same inputs, same process: one code path, so bit-equal on any CPU
     assert np.array_equal(out, upscale(small, size[1], size[0], model=str(path), tile=tile))
-    assert seam_is_typical(out)                                           # one deterministic draw
+    assert seam_is_typical(out)  # one deterministic draw
 
 
 def test_wrap_padding_makes_the_seam_an_ordinary_column(tmp_path, base_image):

@@ -1,4 +1,5 @@
 """Model resolution: local paths, the HF cache (offline only), one-line errors."""
+
 import pytest
 import torch
 

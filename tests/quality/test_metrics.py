@@ -1,4 +1,5 @@
 """holoflow.quality.metrics against known values."""
+
 import math
 
 import pytest
@@ -20,14 +21,13 @@ def test_psnr_known_noise_level():
     g = torch.Generator().manual_seed(1)
     noise = torch.randn(8, 64, 64, 3, generator=g, dtype=torch.float64) * 0.05
     ref = torch.full_like(noise, 0.5)
-    assert metrics.psnr(ref + noise, ref) == pytest.approx(
-        -20 * math.log10(0.05), abs=0.05)
+    assert metrics.psnr(ref + noise, ref) == pytest.approx(-20 * math.log10(0.05), abs=0.05)
 
 
 def test_psnr_mask_counts_only_masked_pixels():
     x = torch.zeros(1, 4, 4, 3)
     y = x.clone()
-    y[0, :2] = 1.0                                   # wrong only where the mask is 0
+    y[0, :2] = 1.0  # wrong only where the mask is 0
     mask = torch.zeros(1, 4, 4)
     mask[0, 2:] = 1
     assert metrics.psnr(y, x, mask) == math.inf

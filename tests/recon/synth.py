@@ -8,6 +8,7 @@ foreground box that occludes part of the +z wall, so offset cameras see disocclu
   z-buffer; A = 1 where a point landed, R,G,B = that point's colour.
 Files follow docs/artifacts.md (cameras.json, views/*.exr, pf.ply).
 """
+
 from __future__ import annotations
 
 import json
@@ -24,7 +25,7 @@ from holoflow.splat.model import GaussianModel
 from holoflow.splat.project import SH_C0
 from holoflow.splat.rasterize import render
 
-FACES = [(0, 0, 1), (1, 0, 0), (0, 0, -1), (-1, 0, 0), (0, -1, 0), (0, 1, 0)]   # +z, +x, -z, -x, up, down
+FACES = [(0, 0, 1), (1, 0, 0), (0, 0, -1), (-1, 0, 0), (0, -1, 0), (0, 1, 0)]  # +z, +x, -z, -x, up, down
 
 
 def _wall_points(h: float) -> tuple[np.ndarray, np.ndarray]:
@@ -39,8 +40,14 @@ def _wall_points(h: float) -> tuple[np.ndarray, np.ndarray]:
             p[:, axis] = 2.0 * sign
             p[:, others[0]], p[:, others[1]] = a, b
             k = axis * 2 + (sign > 0)
-            c = np.stack([0.5 + 0.35 * np.sin(1.3 * a + k), 0.5 + 0.35 * np.cos(1.1 * b + 0.7 * k),
-                          0.45 + 0.3 * np.sin(0.9 * (a + b) + 0.3 * k)], 1)
+            c = np.stack(
+                [
+                    0.5 + 0.35 * np.sin(1.3 * a + k),
+                    0.5 + 0.35 * np.cos(1.1 * b + 0.7 * k),
+                    0.45 + 0.3 * np.sin(0.9 * (a + b) + 0.3 * k),
+                ],
+                1,
+            )
             pts.append(p)
             cols.append(c)
     return np.concatenate(pts), np.concatenate(cols)
@@ -70,15 +77,19 @@ def truth_model() -> GaussianModel:
     rgb = np.concatenate([wc, bc])
     scale = np.concatenate([np.full(len(wp), 0.06), np.full(len(bp), 0.03)])
     n = len(xyz)
-    return GaussianModel(means=torch.from_numpy(xyz), log_scales=torch.from_numpy(np.log(scale))[:, None].repeat(1, 3),
-                         quats=torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1),
-                         opacity_logits=torch.full((n,), 4.0),
-                         sh_dc=torch.from_numpy((rgb - 0.5) / SH_C0)[:, None, :], sh_rest=torch.zeros(n, 0, 3))
+    return GaussianModel(
+        means=torch.from_numpy(xyz),
+        log_scales=torch.from_numpy(np.log(scale))[:, None].repeat(1, 3),
+        quats=torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1),
+        opacity_logits=torch.full((n,), 4.0),
+        sh_dc=torch.from_numpy((rgb - 0.5) / SH_C0)[:, None, :],
+        sh_rest=torch.zeros(n, 0, 3),
+    )
 
 
 def base_cameras() -> torch.Tensor:
     d = torch.tensor(FACES, dtype=torch.float64)
-    return look_at(torch.zeros_like(d), d).float()                     # [6, 4, 4]
+    return look_at(torch.zeros_like(d), d).float()  # [6, 4, 4]
 
 
 def supplementary_cameras(base: torch.Tensor, offset: float = 0.6) -> torch.Tensor:
@@ -87,7 +98,7 @@ def supplementary_cameras(base: torch.Tensor, offset: float = 0.6) -> torch.Tens
     for vm in base:
         R = vm[:3, :3]
         for axis, sign in ((1, -1), (1, 1), (0, -1), (0, 1)):
-            eye = sign * offset * R[axis]                                 # camera axis in world
+            eye = sign * offset * R[axis]  # camera axis in world
             t = -R @ eye
             m = vm.clone()
             m[:3, 3] = t
@@ -107,10 +118,18 @@ def render_truth(viewmats: torch.Tensor, size: int) -> tuple[torch.Tensor, torch
 
 def _cameras_json(viewmats: torch.Tensor, size: int, kind: str, names: list[str]) -> dict:
     K = intrinsics_from_fov(90.0, size, size)
-    return {"width": size, "height": size, "fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
-            "cy": float(K[1, 2]),
-            "views": [{"name": n, "file": f"views/{n}.exr", "viewmat": vm.tolist(), "kind": kind,
-                       "base": int(n.split("_")[0])} for n, vm in zip(names, viewmats)]}
+    return {
+        "width": size,
+        "height": size,
+        "fx": float(K[0, 0]),
+        "fy": float(K[1, 1]),
+        "cx": float(K[0, 2]),
+        "cy": float(K[1, 2]),
+        "views": [
+            {"name": n, "file": f"views/{n}.exr", "viewmat": vm.tolist(), "kind": kind, "base": int(n.split("_")[0])}
+            for n, vm in zip(names, viewmats)
+        ],
+    }
 
 
 def _write_set(folder: Path, cams: dict, rgb_srgb: torch.Tensor, alpha: np.ndarray | None) -> None:
@@ -123,8 +142,9 @@ def _write_set(folder: Path, cams: dict, rgb_srgb: torch.Tensor, alpha: np.ndarr
     (folder / "cameras.json").write_text(json.dumps(cams))
 
 
-def zbuffer(xyz: np.ndarray, rgb: np.ndarray, viewmat: np.ndarray, K: np.ndarray, size: int,
-            radius: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def zbuffer(
+    xyz: np.ndarray, rgb: np.ndarray, viewmat: np.ndarray, K: np.ndarray, size: int, radius: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
     """Project coloured points with a z-buffer, each point covering (2 radius + 1)^2 pixels.
     Returns image [S, S, 3] and mask [S, S] (1 = a point landed)."""
     cam = xyz @ viewmat[:3, :3].T + viewmat[:3, 3]
@@ -134,7 +154,7 @@ def zbuffer(xyz: np.ndarray, rgb: np.ndarray, viewmat: np.ndarray, K: np.ndarray
     v = np.floor(K[1, 1] * cam[:, 1] / cam[:, 2] + K[1, 2]).astype(int)
     z = np.full((size, size), np.inf)
     img = np.zeros((size, size, 3))
-    for order in np.argsort(-cam[:, 2]):                                   # far to near: near wins
+    for order in np.argsort(-cam[:, 2]):  # far to near: near wins
         for dv in range(-radius, radius + 1):
             for du in range(-radius, radius + 1):
                 x, y = u[order] + du, v[order] + dv
@@ -156,7 +176,7 @@ def build(root: Path, size: int = 24) -> dict[str, Path]:
     pts = []
     for i, vm in enumerate(base.double()):
         cam = rays * depth[i].double()[..., None]
-        pts.append(((cam - vm[:3, 3]) @ vm[:3, :3]).reshape(-1, 3))        # R^T (p - t)
+        pts.append(((cam - vm[:3, 3]) @ vm[:3, :3]).reshape(-1, 3))  # R^T (p - t)
     xyz = torch.cat(pts).numpy().astype(np.float32)
     col = rgb.reshape(-1, 3).numpy()
     cloud = root / "cloud"
@@ -170,8 +190,12 @@ def build(root: Path, size: int = 24) -> dict[str, Path]:
         imgs.append(img)
         masks.append(m)
     snames = [f"{i // 4:03d}_{i % 4}" for i in range(len(supp))]
-    _write_set(root / "pcd", _cameras_json(supp, size, "supplementary", snames),
-               torch.from_numpy(np.stack(imgs)).float(), np.stack(masks))
+    _write_set(
+        root / "pcd",
+        _cameras_json(supp, size, "supplementary", snames),
+        torch.from_numpy(np.stack(imgs)).float(),
+        np.stack(masks),
+    )
     return {"cloud": cloud, "pano": root / "pano", "pcd": root / "pcd"}
 
 
@@ -186,10 +210,17 @@ def novel_cameras(n: int, seed: int = 0, offset: float = 0.5) -> torch.Tensor:
 def job_spec(tmp: Path, stage: str, engine: str, params: dict, inputs: dict[str, Path]) -> Path:
     out = tmp / f"{stage}_out"
     out.mkdir()
-    spec = {"stage": stage, "engine": engine, "params": params, "seed": 0, "prompt": "",
-            "inputs": {k: str(v) for k, v in inputs.items()}, "output_dir": str(out),
-            "work_dir": str(tmp / f"{stage}_work"), "device": "cpu"}
+    spec = {
+        "stage": stage,
+        "engine": engine,
+        "params": params,
+        "seed": 0,
+        "prompt": "",
+        "inputs": {k: str(v) for k, v in inputs.items()},
+        "output_dir": str(out),
+        "work_dir": str(tmp / f"{stage}_work"),
+        "device": "cpu",
+    }
     path = tmp / f"{stage}.json"
     path.write_text(json.dumps(spec))
     return path
-

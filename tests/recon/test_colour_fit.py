@@ -1,5 +1,6 @@
 """The viewing-size colour fit (holoflow/recon/colour_fit.py): one SART step against a dense
 least-squares reference, convergence, SH > 0, unseen Gaussians, and the target views."""
+
 from __future__ import annotations
 
 import math
@@ -15,11 +16,14 @@ from holoflow.splat.synthetic import intrinsics, look_at, room_scene
 SIZE = 24
 
 
-def _model(n: int = 300, seed: int = 0, sh_degree: int = 0, colour: float | None = 0.5) -> tuple[GaussianModel, torch.Tensor]:
+def _model(
+    n: int = 300, seed: int = 0, sh_degree: int = 0, colour: float | None = 0.5
+) -> tuple[GaussianModel, torch.Tensor]:
     s = room_scene(n, seed=seed, half=1.0)
     rgb = s["colors"] if colour is None else torch.full_like(s["colors"], colour)
-    m = GaussianModel.from_points(s["means"].numpy(), rgb.numpy(), sh_degree=sh_degree, opacity=0.5,
-                                  scales=s["scales"] * 1.5, quats=s["quats"])
+    m = GaussianModel.from_points(
+        s["means"].numpy(), rgb.numpy(), sh_degree=sh_degree, opacity=0.5, scales=s["scales"] * 1.5, quats=s["quats"]
+    )
     with torch.no_grad():
         m.opacity_logits.copy_(torch.logit(s["opacities"].clamp(0.3, 0.95)))
     return m, s["colors"]
@@ -52,12 +56,26 @@ def test_one_pass_is_the_dense_sart_step(weights, max_colour):
     target = torch.rand(3, SIZE, SIZE, 3, generator=torch.Generator().manual_seed(1))
     N = len(m)
     eye = torch.eye(N)
-    W = rasterize(m.means.detach(), m.quats.detach(), torch.exp(m.log_scales.detach()),
-                  torch.sigmoid(m.opacity_logits.detach()), eye, vm, K.expand(3, 3, 3), SIZE, SIZE,
-                  backend="reference", depth=False)["rgb"].reshape(-1, N).double()          # [P, N]
-    c = (SH_C0 * m.sh_dc[:, 0, :].detach() + 0.5).double()                                   # [N, 3]
+    W = (
+        rasterize(
+            m.means.detach(),
+            m.quats.detach(),
+            torch.exp(m.log_scales.detach()),
+            torch.sigmoid(m.opacity_logits.detach()),
+            eye,
+            vm,
+            K.expand(3, 3, 3),
+            SIZE,
+            SIZE,
+            backend="reference",
+            depth=False,
+        )["rgb"]
+        .reshape(-1, N)
+        .double()
+    )  # [P, N]
+    c = (SH_C0 * m.sh_dc[:, 0, :].detach() + 0.5).double()  # [N, 3]
     u = torch.tensor([1.0] * 3 if weights is None else weights, dtype=torch.float64)
-    u = u.repeat_interleave(SIZE * SIZE)[:, None]                                            # [P, 1]
+    u = u.repeat_interleave(SIZE * SIZE)[:, None]  # [P, 1]
     resid = W @ c - target.reshape(-1, 3).double()
     num, den = (u * W).T @ resid, (u * W).sum(0)
     ok = den > 0.05
@@ -92,20 +110,20 @@ def test_view_dependent_colours_fit_their_dc_only(backend):
     vm, K = _cameras()
     target = _truth_targets(truth, vm, K)
     log = fit_colours(m, _views(target, vm, K), 3, backend=backend)
-    assert torch.equal(m.sh_rest.detach(), rest)          # untouched: the same tensor's values
+    assert torch.equal(m.sh_rest.detach(), rest)  # untouched: the same tensor's values
     assert log["psnr_before_pass"][2] > log["psnr_before_pass"][0] + 3.0
 
 
 def test_unseen_gaussians_keep_their_colour_and_colours_stay_in_range():
     m, truth = _model()
-    vm, K = _cameras(1)                                   # one camera: most of the room unseen
+    vm, K = _cameras(1)  # one camera: most of the room unseen
     before = m.sh_dc.detach().clone()
-    target = torch.ones(1, SIZE, SIZE, 3) * 2.0           # unreachable: colours clip at 1
+    target = torch.ones(1, SIZE, SIZE, 3) * 2.0  # unreachable: colours clip at 1
     fit_colours(m, _views(target, vm, K), 2, backend="cpu")
-    cam = (m.means.detach() @ vm[0, :3, :3].T + vm[0, :3, 3])
+    cam = m.means.detach() @ vm[0, :3, :3].T + vm[0, :3, 3]
     behind = cam[:, 2] < 0
     assert bool(behind.any())
-    assert torch.equal(m.sh_dc.detach()[behind], before[behind])   # never written
+    assert torch.equal(m.sh_dc.detach()[behind], before[behind])  # never written
     rgb = SH_C0 * m.sh_dc.detach()[:, 0, :] + 0.5
     assert float(rgb.max()) <= 1.0 + 1e-6 and float(rgb.min()) >= -1e-6
     assert float(rgb[~behind].max()) > 0.99
@@ -136,7 +154,7 @@ def test_colours_may_pass_one_up_to_max_colour():
 def test_polar_weights_pick_the_views_near_the_poles():
     from holoflow.recon.colour_fit import polar_weights
 
-    dirs = [(0, -1, 0.1), (0, 0, 1), (0.3, 1, 0), (1, -0.6, 0)]      # zenith, horizon, nadir-ish, 31 deg up
+    dirs = [(0, -1, 0.1), (0, 0, 1), (0.3, 1, 0), (1, -0.6, 0)]  # zenith, horizon, nadir-ish, 31 deg up
     views = [dict(viewmat=look_at((0, 0, 0), d)) for d in dirs]
     assert polar_weights(views, 8.0) == [8.0, 1.0, 8.0, 1.0]
     assert polar_weights([], 8.0) == []
@@ -151,8 +169,15 @@ def test_viewing_views_keep_the_field_of_view():
     g = torch.Generator().manual_seed(0)
     pano = torch.rand(3, 32, 64, generator=g)
     vm, _ = _cameras(2)
-    cams = dict(width=16, height=16, fx=8.0, fy=8.0, cx=8.0, cy=8.0,
-                views=[dict(name=f"{i:03d}", viewmat=v.flatten().tolist()) for i, v in enumerate(vm)])
+    cams = dict(
+        width=16,
+        height=16,
+        fx=8.0,
+        fy=8.0,
+        cx=8.0,
+        cy=8.0,
+        views=[dict(name=f"{i:03d}", viewmat=v.flatten().tolist()) for i, v in enumerate(vm)],
+    )
     views = viewing_views(pano, cams, 48)
     assert [v["name"] for v in views] == ["000", "001"]
     assert float(views[0]["K"][0, 0]) == pytest.approx(24.0) and float(views[0]["K"][0, 2]) == pytest.approx(24.0)

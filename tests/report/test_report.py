@@ -5,6 +5,7 @@ image.
 Chromium tests skip when no chromium is installed, unless HOLOFLOW_REQUIRE_CHROMIUM=1 (set by .ci/run),
 which turns the skip into a failure.
 """
+
 import json
 import os
 import re
@@ -28,13 +29,14 @@ def _need_chromium():
     if chromium.find() is None:
         if os.environ.get("HOLOFLOW_REQUIRE_CHROMIUM") == "1":
             pytest.fail("HOLOFLOW_REQUIRE_CHROMIUM=1 but no chromium on PATH (apt-get install chromium)")
-        pytest.skip("no chromium on PATH (Debian: apt-get install chromium); set HOLOFLOW_REQUIRE_CHROMIUM=1 "
-                    "to make this a failure")
+        pytest.skip(
+            "no chromium on PATH (Debian: apt-get install chromium); set HOLOFLOW_REQUIRE_CHROMIUM=1 "
+            "to make this a failure"
+        )
 
 
 def _holoflow(store, *args):
-    cmd = [sys.executable, "-m", "holoflow", *args[:1], "--pipeline", str(PIPELINE), "--store", str(store),
-           *args[1:]]
+    cmd = [sys.executable, "-m", "holoflow", *args[:1], "--pipeline", str(PIPELINE), "--store", str(store), *args[1:]]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     return proc
@@ -76,22 +78,24 @@ def test_full_run_report(runs, tmp_path):
     assert html.count("<img ") == len(titles), "every image is an inline data: URI"
     for stage in PANOS:
         assert f'id="{stage}"' in html
-    assert titles.count("pano.exr") == 4                            # the four panoramas
+    assert titles.count("pano.exr") == 4  # the four panoramas
     assert "lineart.exr Y" in titles and "disparity.exr Y" in titles and "depth.exr Z" in titles
     assert "faces/ aligned.Y" in titles and "faces/ raw.Y" in titles  # tangent faces mosaics
-    for sheet in ("views/", "views/ A", "renders/"):                  # PANO / PCD / INP sheets and masks
+    for sheet in ("views/", "views/ A", "renders/"):  # PANO / PCD / INP sheets and masks
         assert sheet in titles
-    assert titles.count("views/ A") == 2                              # pcd_set and inp_set masks
+    assert titles.count("views/ A") == 2  # pcd_set and inp_set masks
     for cloud in ("p0.ply", "pf.ply", "ps.ply", "gaussians.ply", "scene.ply"):
         assert cloud in titles
     assert titles.count("train_log.json: loss") == 2 and titles.count("train_log.json: Gaussians") == 2
     assert "previews/look_around.png" in titles
     assert '<h2 id="viewing">what people see (512 px)</h2>' in html and "base PSNR dB (10 cameras)" in html
     assert "base cameras at 512 px" in titles and "novel cameras 0.5 m off centre" in titles
-    assert "not run" not in re.sub(r"<script>.*</script>", "", html, flags=re.S).split("<h2>stages")[1].split(
-        "<h2>metrics")[0]
+    assert (
+        "not run"
+        not in re.sub(r"<script>.*</script>", "", html, flags=re.S).split("<h2>stages")[1].split("<h2>metrics")[0]
+    )
     record = json.loads((store / "keys" / f"{_key(store, full, 'transfer_opt')}.json").read_text())
-    assert f"{record['provenance']['peak_rss_mb']:.4g}" in html    # peak memory in the summary
+    assert f"{record['provenance']['peak_rss_mb']:.4g}" in html  # peak memory in the summary
 
     _need_chromium()
     total, loaded, broken = _loaded(tmp_path / "full.html")
@@ -101,7 +105,9 @@ def test_full_run_report(runs, tmp_path):
 def test_partial_run_shows_not_run(runs, tmp_path):
     store, partial, full = runs
     html = _report(store, partial, tmp_path / "partial.html")
-    assert html.count('<span class="badge notrun">not run</span>') == 2 * 9   # table row + heading, 9 stages (export too)
+    assert (
+        html.count('<span class="badge notrun">not run</span>') == 2 * 9
+    )  # table row + heading, 9 stages (export too)
     assert html.count('<span class="badge cached">cached</span>') == 2 * len(PANOS)
     assert html.count("<td>this run</td>") == 0 and html.count(f"<td>{full}</td>") == len(PANOS)
     titles = _img_titles(html)
@@ -115,8 +121,10 @@ def test_chromium_check_catches_a_broken_image(tmp_path):
     from holoflow.report import page, pictures
 
     good = pictures.image_uri(np.zeros((4, 6, 3), np.uint8))
-    html = (f"<!DOCTYPE html><html><body><img src='{good}' alt='good'>"
-            f"<img src='data:image/png;base64,iVBORw0KGgoAAAA' alt='bad'><script>{page.SCRIPT}</script></body></html>")
+    html = (
+        f"<!DOCTYPE html><html><body><img src='{good}' alt='good'>"
+        f"<img src='data:image/png;base64,iVBORw0KGgoAAAA' alt='bad'><script>{page.SCRIPT}</script></body></html>"
+    )
     (tmp_path / "p.html").write_text(html)
     _need_chromium()
     assert _loaded(tmp_path / "p.html") == (2, 1, "bad")
@@ -135,7 +143,7 @@ def test_cloud_renderers_agree(tmp_path):
 
     g = np.linspace(-2, 2, 60)
     x, z = np.meshgrid(g, g)
-    xyz = np.stack([x.ravel(), np.full(x.size, 1.5), z.ravel()], 1).astype(np.float32)    # floor 1.5 m below
+    xyz = np.stack([x.ravel(), np.full(x.size, 1.5), z.ravel()], 1).astype(np.float32)  # floor 1.5 m below
     rgb = np.tile(np.array([[200, 30, 30]], np.uint8), (len(xyz), 1))
     write_points(tmp_path / "floor.ply", xyz, rgb)
     (img,), renderer = clouds.render_files([(tmp_path / "floor.ply", tmp_path / "floor.png")])
@@ -146,8 +154,9 @@ def test_cloud_renderers_agree(tmp_path):
     import cv2
 
     # point footprints differ (VTK points vs z-buffer squares): compare the closed-up silhouettes
-    a, b = (cv2.dilate((im.astype(int).sum(-1) < 700).astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
-            for im in (img, ref))
+    a, b = (
+        cv2.dilate((im.astype(int).sum(-1) < 700).astype(np.uint8), np.ones((9, 9), np.uint8)) > 0 for im in (img, ref)
+    )
     iou = (a & b).sum() / (a | b).sum()
     assert a.sum() > 20000 and iou > 0.9, iou
 
@@ -173,7 +182,7 @@ def test_outputs_gone_from_the_store_are_noted_not_broken(runs, tmp_path):
     store, partial, _ = runs
     copy = tmp_path / "store"
     shutil.copytree(store / "runs" / partial, copy / "runs" / partial, symlinks=True)
-    shutil.copytree(store / "keys", copy / "keys")                 # records kept, objects gone
+    shutil.copytree(store / "keys", copy / "keys")  # records kept, objects gone
     html = _report(copy, partial, tmp_path / "gone.html")
     assert not _img_titles(html)
     assert html.count("output(s) no longer in the store") == len(PANOS)

@@ -1,5 +1,6 @@
 """The four panorama stage programs run as processes (docs/stage-protocol.md) at a tiny size with their
 default engines: contracts, byte determinism, seams, passthrough, and one-line user errors."""
+
 import json
 import subprocess
 import sys
@@ -15,18 +16,39 @@ ROOT = Path(__file__).resolve().parents[2]
 W, H = 96, 48
 
 
-def run_stage(tmp: Path, stage: str, engine: str, params: dict, prompt: str = "", inputs: dict | None = None,
-              seed: int = 0, name: str | None = None) -> subprocess.CompletedProcess:
+def run_stage(
+    tmp: Path,
+    stage: str,
+    engine: str,
+    params: dict,
+    prompt: str = "",
+    inputs: dict | None = None,
+    seed: int = 0,
+    name: str | None = None,
+) -> subprocess.CompletedProcess:
     name = name or stage
     out, work = tmp / name / "out", tmp / name / "work"
     out.mkdir(parents=True)
     work.mkdir(parents=True)
-    job = {"stage": stage, "engine": engine, "params": params, "seed": seed, "prompt": prompt,
-           "inputs": {k: str(v) for k, v in (inputs or {}).items()}, "output_dir": str(out),
-           "work_dir": str(work), "device": "cpu"}
+    job = {
+        "stage": stage,
+        "engine": engine,
+        "params": params,
+        "seed": seed,
+        "prompt": prompt,
+        "inputs": {k: str(v) for k, v in (inputs or {}).items()},
+        "output_dir": str(out),
+        "work_dir": str(work),
+        "device": "cpu",
+    }
     (tmp / name / "job.json").write_text(json.dumps(job))
-    return subprocess.run([sys.executable, str(ROOT / "stages" / f"{stage}.py"), str(tmp / name / "job.json")],
-                          capture_output=True, text=True, cwd=ROOT, timeout=300)
+    return subprocess.run(
+        [sys.executable, str(ROOT / "stages" / f"{stage}.py"), str(tmp / name / "job.json")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
 
 
 def seam_ok(img: np.ndarray) -> bool:
@@ -43,15 +65,24 @@ def chain(tmp_path_factory):
     prompt = "a small kitchen with brick walls and a lamp, watercolor"
     runs = {}
     runs["base"] = run_stage(tmp, "base_pano", "procedural", {"width": W, "height": H, "samples": 2}, prompt)
-    runs["base2"] = run_stage(tmp, "base_pano", "procedural", {"width": W, "height": H, "samples": 2}, prompt,
-                              name="base_pano_again")
+    runs["base2"] = run_stage(
+        tmp, "base_pano", "procedural", {"width": W, "height": H, "samples": 2}, prompt, name="base_pano_again"
+    )
     base = tmp / "base_pano" / "out"
-    runs["stylize"] = run_stage(tmp, "stylize", "classical", {"width": W, "height": H, "style": "auto"}, prompt,
-                                {"pano": base})
-    runs["upscale"] = run_stage(tmp, "upscale", "lanczos", {"width": 2 * W, "height": 2 * H},
-                                inputs={"pano": tmp / "stylize" / "out"})
-    runs["detail"] = run_stage(tmp, "detail", "classical", {"width": 2 * W, "height": 2 * H, "strength": 0.5},
-                               prompt, {"pano": tmp / "upscale" / "out"})
+    runs["stylize"] = run_stage(
+        tmp, "stylize", "classical", {"width": W, "height": H, "style": "auto"}, prompt, {"pano": base}
+    )
+    runs["upscale"] = run_stage(
+        tmp, "upscale", "lanczos", {"width": 2 * W, "height": 2 * H}, inputs={"pano": tmp / "stylize" / "out"}
+    )
+    runs["detail"] = run_stage(
+        tmp,
+        "detail",
+        "classical",
+        {"width": 2 * W, "height": 2 * H, "strength": 0.5},
+        prompt,
+        {"pano": tmp / "upscale" / "out"},
+    )
     for name, r in runs.items():
         assert r.returncode == 0, f"{name}: {r.stderr}"
     return tmp, runs
@@ -63,7 +94,7 @@ def test_base_pano_contract_and_truth(chain):
     assert set(channels) == {"R", "G", "B", "Z"}
     assert all(c.shape == (H, W) for c in channels.values())
     assert attrs["holoflow.depth_kind"] == "radial" and attrs["holoflow.colorspace"] == "linear"
-    assert np.isfinite(channels["Z"]).all() and (channels["Z"] > 0).all()                 # a room encloses
+    assert np.isfinite(channels["Z"]).all() and (channels["Z"] > 0).all()  # a room encloses
     scene = Scene.from_json((tmp / "base_pano" / "out" / "scene.json").read_text())
     assert scene.kind == "indoor" and scene.effects.lights
     assert "@meta" in runs["base"].stdout
@@ -91,8 +122,9 @@ def test_stylize_upscale_detail_contracts_and_seams(chain):
 def test_stylize_without_a_style_word_passes_through(chain, tmp_path):
     tmp, _ = chain
     base = tmp / "base_pano" / "out"
-    r = run_stage(tmp_path, "stylize", "classical", {"width": W, "height": H, "style": "auto"},
-                  "a small kitchen", {"pano": base})
+    r = run_stage(
+        tmp_path, "stylize", "classical", {"width": W, "height": H, "style": "auto"}, "a small kitchen", {"pano": base}
+    )
     assert r.returncode == 0, r.stderr
     # a copy
     np.testing.assert_array_equal(read_rgb(tmp_path / "stylize" / "out" / "pano.exr"), read_rgb(base / "pano.exr"))
@@ -101,9 +133,13 @@ def test_stylize_without_a_style_word_passes_through(chain, tmp_path):
 
 def test_user_mistakes_end_in_one_line(chain, tmp_path):
     tmp, _ = chain
-    r = run_stage(tmp_path, "upscale", "bicubic", {"width": W, "height": H},
-                  inputs={"pano": tmp / "base_pano" / "out"})
+    r = run_stage(tmp_path, "upscale", "bicubic", {"width": W, "height": H}, inputs={"pano": tmp / "base_pano" / "out"})
     assert r.returncode != 0 and r.stderr.strip().count("\n") == 0 and "unknown engine" in r.stderr
-    r = run_stage(tmp_path, "stylize", "classical", {"width": W, "height": H, "style": "cubism"},
-                  inputs={"pano": tmp / "base_pano" / "out"})
+    r = run_stage(
+        tmp_path,
+        "stylize",
+        "classical",
+        {"width": W, "height": H, "style": "cubism"},
+        inputs={"pano": tmp / "base_pano" / "out"},
+    )
     assert r.returncode != 0 and "unknown style" in r.stderr and r.stderr.strip().count("\n") == 0

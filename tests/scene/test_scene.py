@@ -1,5 +1,6 @@
 """Procedural scenes: description, ray casting against analytic answers, truth from any camera,
 determinism, effects only when asked, prompt words respected."""
+
 import math
 
 import numpy as np
@@ -32,8 +33,18 @@ def _empty_scene(**kw) -> Scene:
     """A bare scene for analytic checks: one plain material, daylight sky, nothing else unless given."""
     sky = Sky("noon", (0.1, 0.2, 0.6), (0.5, 0.6, 0.8), (0.0, -1.0, 0.0), (1.0, 1.0, 1.0), 0.01, 0.0, False)
     mats = [Material("plain", (0.5, 0.5, 0.5), (0.5, 0.5, 0.5))]
-    base = dict(prompt="", seed=0, kind="indoor", eye_height=1.6, materials=mats, sky=sky, effects=Effects(),
-                ambient=(0.5, 0.5, 0.5), key_light=(0.0, 0.0, 0.0), sun_light=(0.0, 0.0, 0.0))
+    base = dict(
+        prompt="",
+        seed=0,
+        kind="indoor",
+        eye_height=1.6,
+        materials=mats,
+        sky=sky,
+        effects=Effects(),
+        ambient=(0.5, 0.5, 0.5),
+        key_light=(0.0, 0.0, 0.0),
+        sun_light=(0.0, 0.0, 0.0),
+    )
     base.update(kw)
     return Scene(**base)
 
@@ -63,7 +74,7 @@ def test_same_prompt_and_seed_same_scene_other_seed_other_scene():
 def test_box_room_depth_is_exact():
     room = Room("box", [[-2.0, 3.0, -1.5, 4.0]], 0.0, 1.6, -1.2, 0, 0, 0)
     scene = _empty_scene(room=room)
-    d = equirect_directions(16, 32).reshape(-1, 3)                                     # [N, 3]
+    d = equirect_directions(16, 32).reshape(-1, 3)  # [N, 3]
     rgb, t = cast(scene, torch.zeros_like(d), d)
     dn = d.numpy().astype(np.float64)
     with np.errstate(divide="ignore"):
@@ -76,8 +87,10 @@ def test_box_room_depth_is_exact():
 
 
 def test_round_and_l_rooms_enclose_the_camera():
-    for room in (Room("round", [], 3.0, 1.6, -1.4, 0, 0, 0),
-                 Room("L", [[-2.0, 2.0, -2.0, 2.0], [1.99, 6.0, 0.0, 2.0]], 0.0, 1.6, -1.4, 0, 0, 0)):
+    for room in (
+        Room("round", [], 3.0, 1.6, -1.4, 0, 0, 0),
+        Room("L", [[-2.0, 2.0, -2.0, 2.0], [1.99, 6.0, 0.0, 2.0]], 0.0, 1.6, -1.4, 0, 0, 0),
+    ):
         d = equirect_directions(24, 48).reshape(-1, 3)
         _, t = cast(_empty_scene(room=room), torch.zeros_like(d), d)
         assert torch.isfinite(t).all() and (t > 0).all()
@@ -87,15 +100,20 @@ def test_round_and_l_rooms_enclose_the_camera():
     np.testing.assert_allclose(t.numpy(), 3.0, rtol=1e-5)
     # L: a ray along +x at z = 1 crosses into the wing and stops at x = 6
     o, d = _rays([[1.0, 0.0, 0.0]])
-    _, t = cast(_empty_scene(room=Room("L", [[-2.0, 2.0, -2.0, 2.0], [1.99, 6.0, 0.0, 2.0]], 0.0, 1.6, -1.4,
-                                          0, 0, 0)), o + torch.tensor([0.0, 0.0, 1.0]), d)
+    _, t = cast(
+        _empty_scene(room=Room("L", [[-2.0, 2.0, -2.0, 2.0], [1.99, 6.0, 0.0, 2.0]], 0.0, 1.6, -1.4, 0, 0, 0)),
+        o + torch.tensor([0.0, 0.0, 1.0]),
+        d,
+    )
     np.testing.assert_allclose(t.numpy(), 6.0, rtol=1e-5)
 
 
 def test_primitives_hit_where_geometry_says():
-    prims = dict(ellipsoids=[Ellipsoid((0.0, 0.0, 5.0), (1.0, 1.0, 1.0), 0)],
-                 boxes=[Box((5.0, 0.0, 0.0), (0.5, 0.5, 0.5), math.pi / 4, 0)],
-                 cylinders=[Cylinder((0.0, 3.0, 0.0), 0.5, 1.0, 0)])
+    prims = dict(
+        ellipsoids=[Ellipsoid((0.0, 0.0, 5.0), (1.0, 1.0, 1.0), 0)],
+        boxes=[Box((5.0, 0.0, 0.0), (0.5, 0.5, 0.5), math.pi / 4, 0)],
+        cylinders=[Cylinder((0.0, 3.0, 0.0), 0.5, 1.0, 0)],
+    )
     scene = _empty_scene(**prims)
     o, d = _rays([[0, 0, 1], [1, 0, 0], [0, 1, 0], [0, -1, 0]])
     _, t = cast(scene, o, d)
@@ -116,7 +134,7 @@ def test_chunking_and_culling_do_not_change_results():
     # not bit for bit: a chunk's length decides which rays fall in torch's scalar tail loop (libm) rather
     # than its SIMD body (Sleef, 8 or 16 lanes by CPU), which may differ in the last bit
     np.testing.assert_allclose(t_a.numpy(), t_b.numpy(), rtol=1e-6)
-    assert np.array_equal(np.isinf(t_a.numpy()), np.isinf(t_b.numpy()))              # hit or sky: exact
+    assert np.array_equal(np.isinf(t_a.numpy()), np.isinf(t_b.numpy()))  # hit or sky: exact
     np.testing.assert_allclose(rgb_a.numpy(), rgb_b.numpy(), atol=1e-6)
 
 
@@ -124,10 +142,10 @@ def test_render_contracts_indoor_and_outdoor():
     rgb, depth = render_equirect(scene_from_prompt(PROMPTS[0], 0), 40, 20, 2)
     assert rgb.shape == (20, 40, 3) and depth.shape == (20, 40)
     assert rgb.dtype == np.float32 and depth.dtype == np.float32
-    assert np.isfinite(rgb).all() and np.isfinite(depth).all() and (depth > 0).all()      # room encloses
+    assert np.isfinite(rgb).all() and np.isfinite(depth).all() and (depth > 0).all()  # room encloses
     rgb, depth = render_equirect(scene_from_prompt(PROMPTS[6], 0), 40, 20, 1)
-    assert np.isinf(depth[0]).all() and (depth[0] > 0).all()                           # sky = +inf
-    assert np.isfinite(depth[-1]).all()                                                # ground below
+    assert np.isinf(depth[0]).all() and (depth[0] > 0).all()  # sky = +inf
+    assert np.isfinite(depth[-1]).all()  # ground below
     assert np.isfinite(rgb).all()
 
 
@@ -209,13 +227,17 @@ def test_sun_shadows_only_with_the_shadow_effect():
 
     from holoflow.scene.model import Ground
 
-    scene = _empty_scene(kind="outdoor", ground=Ground(1.6, 100.0, 0, 0),
-                         boxes=[Box((0.0, 0.5, 3.0), (0.5, 0.1, 0.5), 0.0, 0)], sun_light=(1.0, 1.0, 1.0))
-    o, d = _rays([[0.0, 1.6, 3.0], [0.0, 1.6, -3.0]])                                 # under the slab; open ground
+    scene = _empty_scene(
+        kind="outdoor",
+        ground=Ground(1.6, 100.0, 0, 0),
+        boxes=[Box((0.0, 0.5, 3.0), (0.5, 0.1, 0.5), 0.0, 0)],
+        sun_light=(1.0, 1.0, 1.0),
+    )
+    o, d = _rays([[0.0, 1.6, 3.0], [0.0, 1.6, -3.0]])  # under the slab; open ground
     lit, t = cast(scene, o, d)
     shaded, t2 = cast(dataclasses.replace(scene, effects=Effects(shadows=True)), o, d)
     assert torch.equal(t, t2)  # shadows shade after the same hit test on the same rays: one code path
-    assert torch.allclose(lit[1], shaded[1])                                          # open ground: unchanged
+    assert torch.allclose(lit[1], shaded[1])  # open ground: unchanged
     # ground lit by ambient 0.5 (+ sun 1.0 when not in shadow): the shadow keeps a third of the light
     np.testing.assert_allclose((shaded[0] / lit[0]).numpy(), 1.0 / 3.0, rtol=1e-4)
 
@@ -265,12 +287,24 @@ def test_any_mix_of_vocabulary_words_gives_a_valid_scene():
 
     from holoflow.scene import vocab
 
-    words = sorted(set(vocab.COLORS) | set(vocab.MATERIALS) | set(vocab.TARGETS) | set(vocab.ROOMS)
-                   | set(vocab.FURNITURE) | set(vocab.BIOMES) | set(vocab.TIME_WORDS) | set(vocab.FOG_WORDS)
-                   | vocab.SHADOW_WORDS | vocab.LIGHT_WORDS | set(vocab.SIZES) | vocab.ROUND | {"l-shaped"})
+    words = sorted(
+        set(vocab.COLORS)
+        | set(vocab.MATERIALS)
+        | set(vocab.TARGETS)
+        | set(vocab.ROOMS)
+        | set(vocab.FURNITURE)
+        | set(vocab.BIOMES)
+        | set(vocab.TIME_WORDS)
+        | set(vocab.FOG_WORDS)
+        | vocab.SHADOW_WORDS
+        | vocab.LIGHT_WORDS
+        | set(vocab.SIZES)
+        | vocab.ROUND
+        | {"l-shaped"}
+    )
 
     @settings(max_examples=25, deadline=None, derandomize=True)
-    @given(st.lists(st.sampled_from(words), max_size=8), st.integers(-2 ** 40, 2 ** 40))
+    @given(st.lists(st.sampled_from(words), max_size=8), st.integers(-(2**40), 2**40))
     def check(ws, seed):
         scene = scene_from_prompt(" ".join(ws), seed)
         assert Scene.from_json(scene.to_json()) == scene

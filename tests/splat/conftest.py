@@ -1,5 +1,6 @@
 """Splat tests use one torch thread: the tensors are tiny, and on a shared 2-core machine torch's
 OpenMP barriers cost far more than they save (the numba kernels keep their own pool)."""
+
 import pytest
 
 

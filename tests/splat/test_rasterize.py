@@ -1,4 +1,5 @@
 """Rasterizer backends: fast CPU == dense reference (values and gradients), gradcheck, hard cases."""
+
 import math
 
 import pytest
@@ -12,12 +13,15 @@ NAMES = ("means", "quats", "scales", "opacities", "colors")
 
 def random_scene(n, seed, dtype=torch.float64, sh=False):
     g = torch.Generator().manual_seed(seed)
-    p = dict(means=torch.randn(n, 3, generator=g, dtype=dtype) * 0.6 + torch.tensor([0, 0, 3.0], dtype=dtype),
-             quats=torch.randn(n, 4, generator=g, dtype=dtype),
-             scales=torch.rand(n, 3, generator=g, dtype=dtype) * 0.25 + 0.02,
-             opacities=torch.rand(n, generator=g, dtype=dtype) * 0.9 + 0.05,
-             colors=(torch.randn(n, 4, 3, generator=g, dtype=dtype) * 0.5 if sh
-                     else torch.rand(n, 3, generator=g, dtype=dtype)))
+    p = dict(
+        means=torch.randn(n, 3, generator=g, dtype=dtype) * 0.6 + torch.tensor([0, 0, 3.0], dtype=dtype),
+        quats=torch.randn(n, 4, generator=g, dtype=dtype),
+        scales=torch.rand(n, 3, generator=g, dtype=dtype) * 0.25 + 0.02,
+        opacities=torch.rand(n, generator=g, dtype=dtype) * 0.9 + 0.05,
+        colors=(
+            torch.randn(n, 4, 3, generator=g, dtype=dtype) * 0.5 if sh else torch.rand(n, 3, generator=g, dtype=dtype)
+        ),
+    )
     return {k: v.requires_grad_(True) for k, v in p.items()}
 
 
@@ -72,14 +76,14 @@ def test_fast_matches_reference(seed, sh, dtype):
         torch.testing.assert_close(fast[k], ref[k], **tol)
     assert fast["meta"]["packed"] and not ref["meta"]["packed"]
     meta = dense_meta(fast, 2, 60)
-    drawn = meta["radii"] > 0                              # the fast path projects only those
+    drawn = meta["radii"] > 0  # the fast path projects only those
     torch.testing.assert_close(meta["means2d"][drawn], ref["meta"]["means2d"][drawn].detach(), **tol)
     assert_radii_match(meta["radii"], ref["meta"]["radii"])
     gtol = dict(rtol=1e-8, atol=1e-8) if dtype == torch.float64 else dict(rtol=2e-3, atol=2e-3)
     for k in NAMES:
         scale = gref[k].abs().max().clamp_min(1.0)
         torch.testing.assert_close(gfast[k] / scale, gref[k] / scale, **gtol)
-    assert ref["alpha"].max() > 0.5                       # the scene is really in view
+    assert ref["alpha"].max() > 0.5  # the scene is really in view
 
 
 @pytest.mark.parametrize("backend", ["reference", "cpu"])
@@ -87,7 +91,7 @@ def test_gradcheck(backend):
     W, H = 9, 7
     p = random_scene(4, 3, torch.float64)
     vm, K = cameras(W, H, torch.float64, n=1)
-    K[:, 0, 0] = K[:, 1, 1] = 6.0                     # wide view: all four Gaussians cover pixels
+    K[:, 0, 0] = K[:, 1, 1] = 6.0  # wide view: all four Gaussians cover pixels
 
     def f(*args):
         out = rasterize(*args, vm, K, W, H, backend=backend)
@@ -113,10 +117,10 @@ def test_packed_projection_parallel_equals_serial(monkeypatch):
     n = 2 * cp.CHUNK + 300
     p = random_scene(n, 9, torch.float32)
     with torch.no_grad():
-        p["means"][:, :2] *= 2                                 # some off-screen in each camera
+        p["means"][:, :2] *= 2  # some off-screen in each camera
     vm, K = cameras(40, 30, torch.float32, n=3)
     got = []
-    for threshold in (0, 10 ** 12):                             # parallel kernels, serial twins
+    for threshold in (0, 10**12):  # parallel kernels, serial twins
         monkeypatch.setattr(cp, "PARALLEL_MIN_WORK", threshold)
         out = cp.project_cpu(*[p[k] for k in ("means", "quats", "scales", "opacities")], vm, K, 40, 30, 0.01, 1e10)
         loss = (out["means2d"] * 0.3).sum() + out["conics"].sum() + 0.1 * out["depths"].sum()
@@ -147,8 +151,8 @@ def test_tile_binning_is_the_same_for_any_chunk_count(chunks):
     for a, b in zip(ref, got):
         assert np.array_equal(a, b)  # integer tile lists: exact on any CPU
     rec, pbox, ft, offsets, ids, pstart, ent = ref
-    assert all(np.all(np.diff(ids[offsets[t]:offsets[t + 1]]) > 0) for t in range(len(offsets) - 1))
-    assert np.array_equal(np.sort(ent), np.arange(len(ids)))      # every entry owned exactly once
+    assert all(np.all(np.diff(ids[offsets[t] : offsets[t + 1]]) > 0) for t in range(len(offsets) - 1))
+    assert np.array_equal(np.sort(ent), np.arange(len(ids)))  # every entry owned exactly once
 
 
 def _hard_scene(case, dtype=torch.float64):
@@ -170,9 +174,9 @@ def _hard_scene(case, dtype=torch.float64):
         p["opacities"][:6] = 0.0
         p["opacities"][6:] = 1.0
     elif case == "looking_up":
-        vm = look_at([0, 0, 0], [0, -5, 0]).to(dtype)[None]       # world up is -y
+        vm = look_at([0, 0, 0], [0, -5, 0]).to(dtype)[None]  # world up is -y
         m = p["means"]
-        p["means"] = torch.stack([m[:, 0], -m[:, 2], m[:, 1]], 1)      # the scene rotated overhead
+        p["means"] = torch.stack([m[:, 0], -m[:, 2], m[:, 1]], 1)  # the scene rotated overhead
     elif case == "empty":
         p = {k: v[:0] for k, v in p.items()}
     elif case == "one_pixel":
@@ -186,8 +190,19 @@ def _hard_scene(case, dtype=torch.float64):
     return {k: v.clone().requires_grad_(True) for k, v in p.items()}, vm, K, W, H
 
 
-HARD = ["behind_camera", "near_plane", "huge_scales", "tiny_scales", "zero_quaternion",
-        "opacity_0_and_1", "looking_up", "empty", "one_pixel", "non_square", "far_off_axis"]
+HARD = [
+    "behind_camera",
+    "near_plane",
+    "huge_scales",
+    "tiny_scales",
+    "zero_quaternion",
+    "opacity_0_and_1",
+    "looking_up",
+    "empty",
+    "one_pixel",
+    "non_square",
+    "far_off_axis",
+]
 
 
 @pytest.mark.parametrize("case", HARD)
@@ -234,9 +249,18 @@ def test_pixel_centre_convention():
     W = H = 8
     K = intrinsics(W, H, 60.0)[None]
     vm = torch.eye(4)[None]
-    out = rasterize(torch.tensor([[0.0, 0.0, 2.0]]), torch.tensor([[1.0, 0, 0, 0]]),
-                    torch.full((1, 3), 1e-4), torch.tensor([0.9]), torch.ones(1, 3), vm, K, W, H,
-                    backend="cpu")
+    out = rasterize(
+        torch.tensor([[0.0, 0.0, 2.0]]),
+        torch.tensor([[1.0, 0, 0, 0]]),
+        torch.full((1, 3), 1e-4),
+        torch.tensor([0.9]),
+        torch.ones(1, 3),
+        vm,
+        K,
+        W,
+        H,
+        backend="cpu",
+    )
     a = out["alpha"][0, ..., 0]
     centre = a[3:5, 3:5]
     assert torch.allclose(centre, centre[0, 0].expand(2, 2)) and centre[0, 0] > 0.1
@@ -251,8 +275,7 @@ def test_gsplat_cuda_matches_reference():
     W, H = 64, 48
     p = {k: v.detach() for k, v in random_scene(200, 11, torch.float32).items()}
     vm, K = cameras(W, H, torch.float32)
-    ref, gref = render_and_grads({k: v.clone().requires_grad_(True) for k, v in p.items()},
-                                 vm, K, W, H, "reference")
+    ref, gref = render_and_grads({k: v.clone().requires_grad_(True) for k, v in p.items()}, vm, K, W, H, "reference")
     pc = {k: v.cuda().requires_grad_(True) for k, v in p.items()}
     cu, gcu = render_and_grads(pc, vm.cuda(), K.cuda(), W, H, "gsplat")
     # Same projection and compositing rules: measured on an H100 (gsplat 1.5.3) max |diff| 2e-6
@@ -273,14 +296,16 @@ def test_fast_matches_reference_when_most_gaussians_are_out_of_view(dtype):
     d = torch.randn(n, 3, generator=g, dtype=torch.float64)
     p = random_scene(n, 7, dtype, sh=True)
     with torch.no_grad():
-        p["means"].copy_((d / d.norm(dim=-1, keepdim=True) * (2 + torch.rand(n, 1, generator=g, dtype=torch.float64))).to(dtype))
+        p["means"].copy_(
+            (d / d.norm(dim=-1, keepdim=True) * (2 + torch.rand(n, 1, generator=g, dtype=torch.float64))).to(dtype)
+        )
     W, H = 31, 23
     vm = look_at([0, 0, 0], [0, 0, 1]).to(dtype)[None]
     K = intrinsics(W, H, 60.0).to(dtype)[None]
     ref, gref = render_and_grads(p, vm, K, W, H, "reference")
     fast, gfast = render_and_grads(p, vm, K, W, H, "cpu")
     drawn = int((ref["meta"]["radii"] > 0).sum())
-    assert 0 < drawn < n // 4                              # the case this test is about
+    assert 0 < drawn < n // 4  # the case this test is about
     tol = dict(rtol=1e-9, atol=1e-10) if dtype == torch.float64 else dict(rtol=1e-4, atol=2e-5)
     for k in ("rgb", "alpha", "depth"):
         torch.testing.assert_close(fast[k], ref[k], **tol)
@@ -300,14 +325,14 @@ def test_fast_projection_draws_what_the_reference_tests_draw(dtype):
     p = {k: v.detach() for k, v in random_scene(600, 11, dtype).items()}
     g = torch.Generator().manual_seed(11)
     big = torch.rand(600, generator=g) < 0.3
-    p["scales"][big] *= 8                                    # reach tens of px past their centres
-    p["means"][:, :2] *= 3                                    # many centres off-screen
+    p["scales"][big] *= 8  # reach tens of px past their centres
+    p["means"][:, :2] *= 3  # many centres off-screen
     W, H = 40, 30
     vm, K = cameras(W, H, dtype, n=3)
     packed = project_cpu(p["means"], p["quats"], p["scales"], p["opacities"], vm, K, W, H, 0.01, 1e10)
     start, gid = packed["camera_start"], packed["gaussian_ids"]
-    for c in range(3):                                       # camera by camera, Gaussians ascending
-        assert (torch.diff(gid[start[c]:start[c + 1]]) > 0).all()
+    for c in range(3):  # camera by camera, Gaussians ascending
+        assert (torch.diff(gid[start[c] : start[c + 1]]) > 0).all()
     cam = torch.repeat_interleave(torch.arange(3), torch.diff(start))
     fast = {k: unpack(packed[k], cam, gid, 3, 600) for k in ("means2d", "conics", "depths", "ext", "radii")}
     fast["drawn"] = unpack(torch.ones(len(gid), dtype=torch.bool), cam, gid, 3, 600)
@@ -322,7 +347,7 @@ def test_fast_projection_draws_what_the_reference_tests_draw(dtype):
     differ = fast["drawn"] != drawn
     assert bool((margin[differ] <= 1e-3).all()) and int(differ.sum()) <= 2, int(differ.sum())
     outside = drawn & ((m2 < 0) | (m2 > m2.new_tensor([W, H]))).any(-1)
-    assert int(outside.sum()) > 10 and int((~drawn).sum()) > 100       # the cases this test is about
+    assert int(outside.sum()) > 10 and int((~drawn).sum()) > 100  # the cases this test is about
     radii = torch.where(drawn, ext.max(-1).values.ceil(), torch.zeros_like(ext[..., 0])).to(torch.int32)
     assert_radii_match(fast["radii"][~differ], radii[~differ])
     drawn = drawn & ~differ

@@ -1,5 +1,6 @@
 """The densification strategy alone (holoflow/splat/strategy.py): its statistics, clone vs split, the
 cap, pruning, opacity reset and the Adam moments that follow every row; no rasterizer, no trainer."""
+
 import math
 
 import numpy as np
@@ -14,12 +15,13 @@ def _setup(n=6, **cfg_over):
     g = torch.Generator().manual_seed(0)
     xyz = torch.randn(n, 3, generator=g).numpy() + np.array([0, 0, 4], np.float32)
     model = GaussianModel.from_points(xyz, np.full((n, 3), 0.5, np.float32), opacity=0.5)
-    with torch.no_grad():           # Gaussians 0..2 small (clone), 3..5 large (split) for extent 1
+    with torch.no_grad():  # Gaussians 0..2 small (clone), 3..5 large (split) for extent 1
         model.log_scales[:3] = math.log(0.001)
         model.log_scales[3:] = math.log(0.1)
-    opt = torch.optim.Adam([{"params": [getattr(model, k)], "lr": 1e-3, "name": k}
-                            for k in GaussianModel.PARAMS], eps=1e-15)
-    for k in GaussianModel.PARAMS:                # non-zero moments, to see them follow the rows
+    opt = torch.optim.Adam(
+        [{"params": [getattr(model, k)], "lr": 1e-3, "name": k} for k in GaussianModel.PARAMS], eps=1e-15
+    )
+    for k in GaussianModel.PARAMS:  # non-zero moments, to see them follow the rows
         p = getattr(model, k)
         opt.state[p] = {"step": torch.tensor(1.0), "exp_avg": torch.ones_like(p), "exp_avg_sq": torch.ones_like(p)}
     cfg = TrainConfig(densify_every=10, densify_from=0, densify_until=100, size_prune_from=10_000, **cfg_over)
@@ -45,11 +47,11 @@ def test_statistics_accumulate_over_visible_gaussians_only():
     radii = torch.tensor([[0.0, 2, 2, 2, 5, 0]])
     for it in (1, 2):
         strat.step_pre_optimizer(it, means2d, radii, 200, 100)
-    expected = 2 * math.hypot(1e-3 * 100, 1e-3 * 50)                          # NDC units, two views
+    expected = 2 * math.hypot(1e-3 * 100, 1e-3 * 50)  # NDC units, two views
     assert torch.allclose(strat.state["grad"], torch.tensor([0, 1, 1, 1, 1, 0]) * expected)
     assert strat.state["count"].tolist() == [0, 2, 2, 2, 2, 0]
     assert strat.state["radii"].tolist() == [0, 2, 2, 2, 5, 0]
-    strat.step_pre_optimizer(100, means2d, radii, 200, 100)                  # past densify_until: ignored
+    strat.step_pre_optimizer(100, means2d, radii, 200, 100)  # past densify_until: ignored
     assert strat.state["count"].tolist() == [0, 2, 2, 2, 2, 0]
 
 
@@ -82,11 +84,11 @@ def test_packed_statistics_equal_dense_ones():
 def test_clone_small_split_large_then_state_restarts():
     model, opt, strat = _setup()
     _grads(strat, model, [0, 3])
-    assert strat.step_post_optimizer(model, opt, 5) is None                  # not a densify step
+    assert strat.step_post_optimizer(model, opt, 5) is None  # not a densify step
     event = strat.step_post_optimizer(model, opt, 10)
     assert (event["cloned"], event["split"], event["pruned"], event["count"]) == (1, 1, 0, 6 + 1 + 1)
     assert len(model) == 8 and strat.state["grad"].shape == (8,) and float(strat.state["grad"].sum()) == 0
-    kept = 5                                                                    # 6 - the split one
+    kept = 5  # 6 - the split one
     m = opt.state[model.means]["exp_avg"]
     assert m.shape == (8, 3) and bool((m[:kept] == 1).all()) and bool((m[kept:] == 0).all())
     assert all(g["params"][0] is getattr(model, g["name"]) for g in opt.param_groups)

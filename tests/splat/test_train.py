@@ -1,4 +1,5 @@
 """GaussianModel, PLY round trip, training: overfit, multi-view generalisation, densification, cap."""
+
 import json
 import math
 
@@ -20,8 +21,18 @@ def gt_views(scene, eyes, size, target=(0.0, 0.0, 3.0)):
     for e in eyes:
         vm = look_at(e, target)
         with torch.no_grad():
-            img = rasterize(scene["means"], scene["quats"], scene["scales"], scene["opacities"],
-                            scene["colors"], vm[None], K[None], size, size, backend="cpu")["rgb"][0]
+            img = rasterize(
+                scene["means"],
+                scene["quats"],
+                scene["scales"],
+                scene["opacities"],
+                scene["colors"],
+                vm[None],
+                K[None],
+                size,
+                size,
+                backend="cpu",
+            )["rgb"][0]
         views.append(dict(image=img, mask=None, viewmat=vm, K=K))
     return views
 
@@ -32,9 +43,8 @@ def test_from_points_and_ply_round_trip(tmp_path):
     m = GaussianModel.from_points(xyz, rgb, sh_degree=1)
     assert m.sh.shape == (50, 4, 3) and len(m) == 50
     d = np.sort(np.linalg.norm(xyz[:, None] - xyz[None], axis=-1), 1)[:, 1:4]
-    np.testing.assert_allclose(torch.exp(m.log_scales[:, 0]).detach().numpy(),
-                               np.sqrt((d ** 2).mean(1)), rtol=1e-5)
-    with torch.no_grad():                       # non-trivial values everywhere
+    np.testing.assert_allclose(torch.exp(m.log_scales[:, 0]).detach().numpy(), np.sqrt((d**2).mean(1)), rtol=1e-5)
+    with torch.no_grad():  # non-trivial values everywhere
         for t in m.params().values():
             t.add_(torch.randn(t.shape, generator=g))
     m.save_ply(tmp_path / "g.ply")
@@ -65,8 +75,7 @@ def test_overfit_one_view():
     gt["opacities"] = torch.full((150,), 0.95)
     view = gt_views(gt, [(0.0, 0.0, 0.0)], 24, target=(0.0, 0.0, 3.0))[0]
     g = torch.Generator().manual_seed(2)
-    model = GaussianModel.from_points(gt["means"] + 0.02 * torch.randn(150, 3, generator=g),
-                                      torch.full((150, 3), 0.5))
+    model = GaussianModel.from_points(gt["means"] + 0.02 * torch.randn(150, 3, generator=g), torch.full((150, 3), 0.5))
     cfg = TrainConfig(iterations=400, densify_from=40, densify_every=40, densify_until=300)
     log = train(model, [view], cfg, seed=0)
     with torch.no_grad():
@@ -82,17 +91,21 @@ def test_multiview_fit_improves_held_out_views():
     train_views = gt_views(gt, eyes, 20)
     test_views = gt_views(gt, [(0.2, 0.0, 0.2), (-0.2, 0.1, -0.1)], 20)
     g = torch.Generator().manual_seed(5)
-    model = GaussianModel.from_points(gt["means"][::2] + 0.03 * torch.randn(200, 3, generator=g),
-                                      torch.full((200, 3), 0.5))
+    model = GaussianModel.from_points(
+        gt["means"][::2] + 0.03 * torch.randn(200, 3, generator=g), torch.full((200, 3), 0.5)
+    )
 
     def held_out():
         with torch.no_grad():
-            return np.mean([psnr(render(model, v["viewmat"][None], v["K"][None], 20, 20,
-                                        backend="cpu")["rgb"][0], v["image"]) for v in test_views])
+            return np.mean(
+                [
+                    psnr(render(model, v["viewmat"][None], v["K"][None], 20, 20, backend="cpu")["rgb"][0], v["image"])
+                    for v in test_views
+                ]
+            )
 
     before = held_out()
-    train(model, train_views, TrainConfig(iterations=120, densify_from=30, densify_every=30,
-                                          densify_until=100), seed=0)
+    train(model, train_views, TrainConfig(iterations=120, densify_from=30, densify_every=30, densify_until=100), seed=0)
     after = held_out()
     assert after > before + 3.0, (before, after)
 
@@ -119,8 +132,7 @@ def test_masked_pixels_are_ignored():
 def test_densification_deterministic_and_capped():
     gt = surface_scene(200, seed=7, depth=3.0)
     views = gt_views(gt, [(0.0, 0.0, 0.0), (0.3, 0.0, 0.0)], 16)
-    cfg = TrainConfig(iterations=30, densify_from=5, densify_every=10, densify_until=30,
-                      densify_grad_threshold=1e-6)
+    cfg = TrainConfig(iterations=30, densify_from=5, densify_every=10, densify_until=30, densify_grad_threshold=1e-6)
     runs = []
     for _ in range(2):
         m = GaussianModel.from_points(gt["means"][:60], gt["colors"][:60])
@@ -141,8 +153,7 @@ def test_opacity_reset():
     gt = surface_scene(40, seed=8, depth=3.0)
     views = gt_views(gt, [(0.0, 0.0, 0.0)], 12)
     m = GaussianModel.from_points(gt["means"], gt["colors"], opacity=0.5)
-    train(m, views, TrainConfig(iterations=10, opacity_reset_every=10, densify_until=20,
-                                densify_from=100), seed=0)
+    train(m, views, TrainConfig(iterations=10, opacity_reset_every=10, densify_until=20, densify_from=100), seed=0)
     assert torch.sigmoid(m.opacity_logits).max() <= 0.01 + 1e-6
 
 
@@ -151,14 +162,26 @@ def test_size_prune_is_3dgs_within_the_extent_and_angular_beyond():
     distance from the camera centroid): inside the extent that is 3DGS's rule; a far sky-shell Gaussian
     as wide as its pixel footprint survives, one wider than 0.1 of its distance does not."""
     means = torch.tensor([[0.0, 0.0, 2.0], [0.0, 0.3, 2.0], [5.0, 0.0, 300.0], [-5.0, 0.0, 300.0]])
-    scales = torch.tensor([0.05, 0.5, 10.0, 50.0])          # kept, pruned (> 0.2), kept (< 30), pruned
+    scales = torch.tensor([0.05, 0.5, 10.0, 50.0])  # kept, pruned (> 0.2), kept (< 30), pruned
     m = GaussianModel.from_points(means, torch.full((4, 3), 0.5), opacity=0.5)
     with torch.no_grad():
         m.log_scales.copy_(torch.log(scales)[:, None].expand(4, 3))
-    view = dict(image=torch.zeros(8, 8, 3), mask=None, viewmat=look_at((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
-                K=intrinsics(8, 8, 60.0))
-    cfg = TrainConfig(iterations=2, densify_from=0, densify_every=1, densify_until=3, size_prune_from=0,
-                      densify_grad_threshold=1e9, prune_screen_size=1e9, scene_extent=2.0)
+    view = dict(
+        image=torch.zeros(8, 8, 3),
+        mask=None,
+        viewmat=look_at((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+        K=intrinsics(8, 8, 60.0),
+    )
+    cfg = TrainConfig(
+        iterations=2,
+        densify_from=0,
+        densify_every=1,
+        densify_until=3,
+        size_prune_from=0,
+        densify_grad_threshold=1e9,
+        prune_screen_size=1e9,
+        scene_extent=2.0,
+    )
     log = train(m, [view], cfg, seed=0)
     assert [e["pruned"] for e in log["densify"]] == [2, 0]
     assert torch.allclose(m.means[:, 0].detach(), torch.tensor([0.0, 5.0]), atol=1e-3)

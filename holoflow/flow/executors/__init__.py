@@ -14,6 +14,7 @@ Interface (both): ``fits(resources)``, ``submit(task) -> handle``, ``wait(timeou
 result)]``, ``abort()``, ``close()``, plus ``kind``, ``default_retries`` and ``describe()``; the local
 one also ``expect(needs, ahead)`` (warm templates and compiled numba kernels for the steps to come).
 """
+
 from __future__ import annotations
 
 # The module step_env loads first: importing a submodule binds its name on the package, which would
@@ -24,8 +25,15 @@ from .task import StepTask, gpu_ids, host_memory_gb, step_env
 __all__ = ["StepTask", "gpu_ids", "host_memory_gb", "make_executor", "step_env"]
 
 
-def make_executor(kind: str, jobs: int = 1, address: str | None = None, device: str = "cpu",
-                  on_line=None, warm: bool = True, connect_timeout: float | None = None):
+def make_executor(
+    kind: str,
+    jobs: int = 1,
+    address: str | None = None,
+    device: str = "cpu",
+    on_line=None,
+    warm: bool = True,
+    connect_timeout: float | None = None,
+):
     """The executor named ``kind`` (local | ray). ``on_line(label, line)`` gets each step's output lines
     (local only; called on the thread that calls ``wait``); ``warm`` false: every local step exec'd;
     ``connect_timeout``: seconds Ray waits for the cluster at ``address`` (None: 60)."""
@@ -37,8 +45,12 @@ def make_executor(kind: str, jobs: int = 1, address: str | None = None, device: 
         from .ray_connect import CONNECT_TIMEOUT_S
         from .ray_executor import RayExecutor
 
-        return RayExecutor(address=address, jobs=jobs, device=device,
-                           connect_timeout=CONNECT_TIMEOUT_S if connect_timeout is None else connect_timeout)
+        return RayExecutor(
+            address=address,
+            jobs=jobs,
+            device=device,
+            connect_timeout=CONNECT_TIMEOUT_S if connect_timeout is None else connect_timeout,
+        )
     from ..pipeline import PipelineError
 
     raise PipelineError(f"--executor {kind!r}: unknown executor; fix: use local or ray")

@@ -15,6 +15,7 @@ are in the cache compiles the missing ones itself, as without this process. With
 process only imports the modules and loads the kernels. It runs at nice 19, on what the
 steps leave idle: on a busy machine it would only take the steps' time.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -58,8 +59,13 @@ def start(modules: list[str], cwd: str):
 
     from .step import popen
 
-    return popen([sys.executable, "-m", __name__, *modules], cwd=cwd, stdin=subprocess.DEVNULL,
-                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return popen(
+        [sys.executable, "-m", __name__, *modules],
+        cwd=cwd,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
 
 
 def main(modules: list[str]) -> int:

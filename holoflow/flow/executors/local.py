@@ -8,6 +8,7 @@ thread; results come back through a queue read by the runner's (main) thread. Py
 warm (forked from a template that imported the heavy modules once, holoflow/flow/executors/warm.py) unless
 ``warm`` is off (``--cold``) or the platform lacks what it needs.
 """
+
 from __future__ import annotations
 
 import queue
@@ -39,7 +40,7 @@ class LocalExecutor:
         self._next = 0
         self._aborted = False
         self.launcher = None
-        self.ahead = None                   # the compile-ahead process, once started
+        self.ahead = None  # the compile-ahead process, once started
         if warm:
             from . import warm as warm_mod
 
@@ -106,9 +107,15 @@ class LocalExecutor:
                 proc.kill()
 
         try:
-            result = run_step(task, "local", on_line=line if self.on_line else None, started=started,
-                              aborted=lambda: self._aborted, launcher=self.launcher)
-        except BaseException as e:          # a bug or an OS error in the runner side: report, don't hang
+            result = run_step(
+                task,
+                "local",
+                on_line=line if self.on_line else None,
+                started=started,
+                aborted=lambda: self._aborted,
+                launcher=self.launcher,
+            )
+        except BaseException as e:  # a bug or an OS error in the runner side: report, don't hang
             result = {"ok": False, "reason": f"{type(e).__name__}: {e}", "tail": ""}
         self._events.put(("done", handle, result))
 
@@ -153,6 +160,6 @@ class LocalExecutor:
             self.abort()
         if self.launcher is not None:
             self.launcher.close()
-        if self.ahead is not None:          # what it compiled is in numba's cache; the rest waits
+        if self.ahead is not None:  # what it compiled is in numba's cache; the rest waits
             self.ahead.kill()
             self.ahead.wait()

@@ -11,6 +11,7 @@ A cluster that is gone (an address file left by a stopped ``ray start``, a head 
 ``ray.init`` retry for ten minutes and more; :func:`wait_for_cluster` first waits for the head's port
 to accept a TCP connection, up to a bound, and fails in one line when it never does.
 """
+
 from __future__ import annotations
 
 import os
@@ -47,7 +48,7 @@ def use_token(address: str | None) -> str | None:
     source = token_source()
     if source is not None:
         os.environ["RAY_AUTH_MODE"] = "token"
-        if "ray._raylet" in sys.modules:        # Ray already read its config in this process
+        if "ray._raylet" in sys.modules:  # Ray already read its config in this process
             sys.modules["ray._raylet"].Config.initialize("")
     return source
 
@@ -63,11 +64,15 @@ def head_address(address: str) -> tuple[str, int]:
     try:
         resolved = services.canonicalize_bootstrap_address(address)
     except (ConnectionError, ValueError) as e:
-        raise PipelineError(f"--address {address}: {str(e).splitlines()[0]}; fix: start the cluster "
-                            f"(`ray start --head`) or pass --address HOST:PORT") from None
+        raise PipelineError(
+            f"--address {address}: {str(e).splitlines()[0]}; fix: start the cluster "
+            f"(`ray start --head`) or pass --address HOST:PORT"
+        ) from None
     if resolved is None:
-        raise PipelineError(f"--address {address}: no Ray cluster is known on this node; fix: start one "
-                            f"(`ray start --head`) or pass --address HOST:PORT")
+        raise PipelineError(
+            f"--address {address}: no Ray cluster is known on this node; fix: start one "
+            f"(`ray start --head`) or pass --address HOST:PORT"
+        )
     host, _, port = resolved.rpartition(":")
     return host.strip("[]"), int(port)
 
@@ -87,8 +92,10 @@ def wait_for_cluster(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
             break
         time.sleep(min(1.0, max(0.0, deadline - time.monotonic())))
     came = f" (from --address {address}: Ray's address file or $RAY_ADDRESS)" if address == "auto" else ""
-    raise PipelineError(f"no Ray cluster answers at {host}:{port}{came} after {timeout:g} s ({why}); fix: "
-                        f"start it (`ray start --head`), check --address, or raise --connect-timeout")
+    raise PipelineError(
+        f"no Ray cluster answers at {host}:{port}{came} after {timeout:g} s ({why}); fix: "
+        f"start it (`ray start --head`), check --address, or raise --connect-timeout"
+    )
 
 
 def join_failed(address: str, e: BaseException, token: str | None) -> PipelineError:
@@ -96,11 +103,15 @@ def join_failed(address: str, e: BaseException, token: str | None) -> PipelineEr
     the cluster wants and the driver lacks, or a token it does not accept)."""
     first = (str(e).strip().splitlines() or [""])[0][:200]
     if token is None and token_source() is None:
-        hint = ("if the cluster uses token authentication (Ray's default when its head had a token), give "
-                "this driver the cluster's token in $RAY_AUTH_TOKEN, $RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token")
+        hint = (
+            "if the cluster uses token authentication (Ray's default when its head had a token), give "
+            "this driver the cluster's token in $RAY_AUTH_TOKEN, $RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token"
+        )
     else:
-        hint = (f"the token from {token or token_source()} was sent: check it is the cluster's "
-                f"(`ray get-auth-token` on the head prints it)")
+        hint = (
+            f"the token from {token or token_source()} was sent: check it is the cluster's "
+            f"(`ray get-auth-token` on the head prints it)"
+        )
     return PipelineError(f"cannot join the Ray cluster at {address} ({type(e).__name__}: {first}); fix: {hint}")
 
 

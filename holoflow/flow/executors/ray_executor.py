@@ -11,6 +11,7 @@ attempt is counted and logged the same way as with the local executor.
 Joining an existing cluster (``--address``): its token and a bounded wait, holoflow.flow.executors.ray_connect.
 Requires the ``ray`` extra (``pip install -e '.[ray]'``); docs/scale.md has the cluster set-up.
 """
+
 from __future__ import annotations
 
 import sys
@@ -31,9 +32,10 @@ class RayExecutor:
     kind = "ray"
     default_retries = 2
 
-    def __init__(self, address: str | None = None, jobs: int = 1, device: str = "cpu",
-                 connect_timeout: float = CONNECT_TIMEOUT_S):
-        token = use_token(address)      # before Ray reads its config: it decides whether to send one
+    def __init__(
+        self, address: str | None = None, jobs: int = 1, device: str = "cpu", connect_timeout: float = CONNECT_TIMEOUT_S
+    ):
+        token = use_token(address)  # before Ray reads its config: it decides whether to send one
         try:
             import ray
         except ImportError:
@@ -48,11 +50,10 @@ class RayExecutor:
         t0 = time.monotonic()
         self.started_here = not ray.is_initialized()
         if self.started_here:
-            kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
-                                  "configure_logging": False}
+            kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
             if address:
                 failed = None
-                with held_stderr() as said:       # Ray's retry warnings: shown only if the join works
+                with held_stderr() as said:  # Ray's retry warnings: shown only if the join works
                     try:
                         ray.init(address=address, **kw)
                     except (ConnectionError, RuntimeError, ray.exceptions.RayError) as e:
@@ -81,15 +82,18 @@ class RayExecutor:
 
     def request(self, res: dict[str, Any]) -> dict[str, Any]:
         """Ray options for a step with declared ``res`` (clamped so it can be placed)."""
-        opts = {"num_cpus": min(max(1, int(res.get("cpus", 1))), self.max_node_cpus),
-                "num_gpus": min(int(res.get("gpus", 0)), self.gpus), "max_retries": 0}
+        opts = {
+            "num_cpus": min(max(1, int(res.get("cpus", 1))), self.max_node_cpus),
+            "num_gpus": min(int(res.get("gpus", 0)), self.gpus),
+            "max_retries": 0,
+        }
         mem = float(res.get("memory_gb", 0.0)) * 2**30
         if mem > 0 and self.memory > 0:
             opts["memory"] = int(min(mem, self.memory))
         return opts
 
     def fits(self, res: dict[str, Any]) -> bool:
-        return True             # Ray queues tasks until their resources are free
+        return True  # Ray queues tasks until their resources are free
 
     def running(self) -> int:
         return len(self._refs)
@@ -105,7 +109,7 @@ class RayExecutor:
         if not self._refs:
             return []
         ready, _ = self.ray.wait(list(self._refs), num_returns=1, timeout=timeout)
-        if ready:           # take everything else that is done too
+        if ready:  # take everything else that is done too
             ready, _ = self.ray.wait(list(self._refs), num_returns=len(self._refs), timeout=0)
         out = []
         for ref in ready:
@@ -121,7 +125,7 @@ class RayExecutor:
         for ref in list(self._refs):
             try:
                 self.ray.cancel(ref, force=True)
-            except Exception:       # already finished or its worker is gone
+            except Exception:  # already finished or its worker is gone
                 pass
         self._refs.clear()
 

@@ -6,6 +6,7 @@ output into objects/ and writes the key record last (docs/store.md). It runs in 
 (local executor) or inside a Ray task on any host that mounts the store at the same path; the result
 is plain data either way. A killed step (or a killed worker) leaves only staging in tmp/.
 """
+
 from __future__ import annotations
 
 import json
@@ -30,9 +31,14 @@ from .task import StepTask, step_env
 LOG_TAIL = 15
 
 
-def run_step(task: StepTask, executor: str = "local", on_line: Callable[[str], None] | None = None,
-             started: Callable[[Any], None] | None = None,
-             aborted: Callable[[], bool] | None = None, launcher=None) -> dict[str, Any]:
+def run_step(
+    task: StepTask,
+    executor: str = "local",
+    on_line: Callable[[str], None] | None = None,
+    started: Callable[[Any], None] | None = None,
+    aborted: Callable[[], bool] | None = None,
+    launcher=None,
+) -> dict[str, Any]:
     """Run ``task``'s program; on exit 0 commit outputs + record. Returns {ok, record | reason, log, tail}.
 
     ``on_line`` gets each output line (progress, meta, log); ``started`` the process once it runs (it
@@ -78,11 +84,11 @@ class _Launched:
     argv0: str
     warm: bool
     code: int
-    usage: Any                      # os.wait4's resource use
+    usage: Any  # os.wait4's resource use
     meta: dict[str, Any]
-    t_start: float                  # time.time() at the launch
-    wall: float                     # seconds
-    lost: bool                      # its warm template died under it
+    t_start: float  # time.time() at the launch
+    wall: float  # seconds
+    lost: bool  # its warm template died under it
 
 
 def _launch(task: StepTask, staging: Path, on_line, started, launcher) -> _Launched:
@@ -93,14 +99,14 @@ def _launch(task: StepTask, staging: Path, on_line, started, launcher) -> _Launc
     out_dir.mkdir()
     work_dir.mkdir()
     job = staging / "job.json"
-    job.write_text(json.dumps({**task.spec, "output_dir": str(out_dir), "work_dir": str(work_dir)},
-                              indent=1, sort_keys=True))
+    job.write_text(
+        json.dumps({**task.spec, "output_dir": str(out_dir), "work_dir": str(work_dir)}, indent=1, sort_keys=True)
+    )
     program = Path(task.program)
     python = program.suffix == ".py"
     argv = [sys.executable, str(program), str(job)] if python else [str(program), str(job)]
-    env = dict(os.environ, PYTHONUNBUFFERED="1", HOLOFLOW_STAGE=task.stage, **step_env(task.resources),
-               **task.env)
-    env.pop("RAY_AUTH_TOKEN", None)     # a Ray cluster's secret: a step has no use for it
+    env = dict(os.environ, PYTHONUNBUFFERED="1", HOLOFLOW_STAGE=task.stage, **step_env(task.resources), **task.env)
+    env.pop("RAY_AUTH_TOKEN", None)  # a Ray cluster's secret: a step has no use for it
     warm = launcher is not None and python
     log_path = staging / "log.txt"
     meta: dict[str, Any] = {}
@@ -133,8 +139,18 @@ def _launch(task: StepTask, staging: Path, on_line, started, launcher) -> _Launc
             raise
         finally:
             proc.stdout.close()
-    return _Launched(out_dir, log_path, Path(argv[0]).name, warm, code, usage, meta, t_start,
-                     time.monotonic() - t0, getattr(proc, "lost", False))
+    return _Launched(
+        out_dir,
+        log_path,
+        Path(argv[0]).name,
+        warm,
+        code,
+        usage,
+        meta,
+        t_start,
+        time.monotonic() - t0,
+        getattr(proc, "lost", False),
+    )
 
 
 def _validate(run: _Launched) -> tuple[list[Path], dict[str, Any] | None]:
@@ -152,8 +168,9 @@ def _validate(run: _Launched) -> tuple[list[Path], dict[str, Any] | None]:
     return files, None
 
 
-def _record(store: Store, task: StepTask, run: _Launched, files: list[Path], executor: str, host: str
-            ) -> dict[str, Any]:
+def _record(
+    store: Store, task: StepTask, run: _Launched, files: list[Path], executor: str, host: str
+) -> dict[str, Any]:
     """Hash the output ``files`` and the log into the store's objects; the step's key record (docs/store.md)."""
     committed = {p.relative_to(run.out_dir).as_posix(): store.put(p) for p in files}
     log_entry = store.put(run.log_path)
@@ -162,19 +179,33 @@ def _record(store: Store, task: StepTask, run: _Launched, files: list[Path], exe
     versions.update(meta.pop("versions", {}) if isinstance(meta.get("versions"), dict) else {})
     if "torch" in meta:
         versions["torch"] = meta["torch"]
-    pinned = {**step_env(task.resources), **task.env}     # what the step's environment held
+    pinned = {**step_env(task.resources), **task.env}  # what the step's environment held
     return {
-        "key": task.key, "stage": task.stage, "components": task.components, "outputs": committed,
+        "key": task.key,
+        "stage": task.stage,
+        "components": task.components,
+        "outputs": committed,
         "provenance": {
-            **task.provenance, "argv0": run.argv0, "meta": meta, "versions": versions,
+            **task.provenance,
+            "argv0": run.argv0,
+            "meta": meta,
+            "versions": versions,
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(run.t_start)),
-            "wall_s": round(run.wall, 3), "cpu_s": round(usage.ru_utime + usage.ru_stime, 3),
-            "peak_rss_mb": round(usage.ru_maxrss / 1024, 1), "exit_code": run.code,
-            "log": log_entry["digest"], "log_size": log_entry["size"],
-            "host": host, "cpu": {**cpu_facts(), **{k: pinned[k] for k in PINNED_ENV}}, "executor": executor,
-            "launch": "warm" if run.warm else "cold", "attempt": task.attempt,
-            "resources": {**task.resources, **({"gpu_ids": task.env["CUDA_VISIBLE_DEVICES"]}
-                                               if "CUDA_VISIBLE_DEVICES" in task.env else {})},
+            "wall_s": round(run.wall, 3),
+            "cpu_s": round(usage.ru_utime + usage.ru_stime, 3),
+            "peak_rss_mb": round(usage.ru_maxrss / 1024, 1),
+            "exit_code": run.code,
+            "log": log_entry["digest"],
+            "log_size": log_entry["size"],
+            "host": host,
+            "cpu": {**cpu_facts(), **{k: pinned[k] for k in PINNED_ENV}},
+            "executor": executor,
+            "launch": "warm" if run.warm else "cold",
+            "attempt": task.attempt,
+            "resources": {
+                **task.resources,
+                **({"gpu_ids": task.env["CUDA_VISIBLE_DEVICES"]} if "CUDA_VISIBLE_DEVICES" in task.env else {}),
+            },
         },
     }
 
@@ -184,8 +215,9 @@ class ExecStep:
     starter (PR_SET_PDEATHSIG)."""
 
     def __init__(self, argv: list[str], cwd: str, env: dict[str, str]):
-        self._proc = popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                           cwd=cwd, env=env)
+        self._proc = popen(
+            argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=cwd, env=env
+        )
         self.pid, self.stdout = self._proc.pid, self._proc.stdout
 
     def kill(self) -> None:

@@ -8,15 +8,18 @@ bits. The kind goes in the record (provenance), not in the cache key: a key per 
 every step of a mixed cluster or a borrowed machine recompute work whose result is valid either way,
 and early cutoff already compares the bytes that come out.
 """
+
 from __future__ import annotations
 
 import functools
 import platform
 
 #: x86-64 micro-architecture levels (System V psABI): the /proc/cpuinfo flags each adds
-LEVELS = (("x86-64-v2", ("cx16", "lahf_lm", "popcnt", "sse4_1", "sse4_2", "ssse3")),
-          ("x86-64-v3", ("avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "abm", "movbe", "xsave")),
-          ("x86-64-v4", ("avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl")))
+LEVELS = (
+    ("x86-64-v2", ("cx16", "lahf_lm", "popcnt", "sse4_1", "sse4_2", "ssse3")),
+    ("x86-64-v3", ("avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "abm", "movbe", "xsave")),
+    ("x86-64-v4", ("avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl")),
+)
 #: extensions past v4 that a library here dispatches on (NumPy's AVX512_SPR, oneDNN's AMX / VNNI / BF16)
 EXTRAS = ("avx512_fp16", "avx512_bf16", "avx512_vnni", "amx_tile")
 
@@ -27,8 +30,11 @@ EXTRAS = ("avx512_fp16", "avx512_bf16", "avx512_vnni", "amx_tile")
 #: AVX-512 ones (SVML) round exp / log / pow differently. The libraries' other dispatch (torch's ATen,
 #: oneDNN, OpenCV, numba) is left alone: it does not change a run's bytes. What it costs and what it
 #: changed: docs/store.md.
-PINNED_ENV = {"MKL_CBWR": "AVX2", "OPENBLAS_CORETYPE": "Haswell",
-              "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"}
+PINNED_ENV = {
+    "MKL_CBWR": "AVX2",
+    "OPENBLAS_CORETYPE": "Haswell",
+    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR",
+}
 
 
 def isa_class(flags: set[str], machine: str | None = None) -> str:
@@ -52,14 +58,13 @@ def cpu_facts() -> dict[str, str]:
         with open("/proc/cpuinfo") as f:
             for line in f:
                 if not line.strip():
-                    break                                   # the first processor is enough
+                    break  # the first processor is enough
                 key, _, value = line.partition(":")
                 info.setdefault(key.strip(), value.strip())
     except OSError:
         pass
     flags = set(info.get("flags", "").split())
-    return {"vendor": info.get("vendor_id", ""), "model": info.get("model name", ""),
-            "isa": isa_class(flags)}
+    return {"vendor": info.get("vendor_id", ""), "model": info.get("model name", ""), "isa": isa_class(flags)}
 
 
 def cpu_kind(facts: dict | None) -> str:
@@ -77,7 +82,12 @@ def bytes_note(kinds: dict[str, list[str]]) -> str:
     if list(known) == [here]:
         where = f"every recorded step ran on this machine's CPU kind ({here})"
     else:
-        where = "steps ran on " + "; ".join(f"{k} ({', '.join(v)})" for k, v in sorted(known.items())) + \
-            f"; this machine: {here}"
-    return (f"bytes: {where}; another CPU kind may give other bytes in some steps' last bits, so a rerun "
-            f"there can miss early cutoff (docs/store.md, Bytes and CPU kinds)")
+        where = (
+            "steps ran on "
+            + "; ".join(f"{k} ({', '.join(v)})" for k, v in sorted(known.items()))
+            + f"; this machine: {here}"
+        )
+    return (
+        f"bytes: {where}; another CPU kind may give other bytes in some steps' last bits, so a rerun "
+        f"there can miss early cutoff (docs/store.md, Bytes and CPU kinds)"
+    )

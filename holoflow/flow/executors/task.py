@@ -1,5 +1,6 @@
 """What an executor is handed and how a step's process is set up, the same on every executor: the
 :class:`StepTask`, the step's thread-count environment, and this host's GPUs and memory."""
+
 from __future__ import annotations
 
 import os
@@ -13,20 +14,20 @@ from holoflow.stage import THREAD_VARS
 class StepTask:
     """Everything a worker needs to run and commit one step (plain data: it is pickled for Ray)."""
 
-    store: str                      # store root, absolute; the same path on every worker
+    store: str  # store root, absolute; the same path on every worker
     stage: str
-    label: str                      # display name ("detail", or "s2/detail" in a batch)
+    label: str  # display name ("detail", or "s2/detail" in a batch)
     key: str
     components: dict[str, Any]
-    spec: dict[str, Any]            # the job spec, less output_dir/work_dir (made by the worker)
-    program: str                    # absolute path; a .py runs with the worker's own python
+    spec: dict[str, Any]  # the job spec, less output_dir/work_dir (made by the worker)
+    program: str  # absolute path; a .py runs with the worker's own python
     cwd: str
-    resources: dict[str, Any]       # the stage's declared {cpus, gpus, memory_gb}
-    provenance: dict[str, Any]      # facts known before the step runs (engine, params, inputs ...)
-    replace: bool = False           # --force: install the new record even if one exists
+    resources: dict[str, Any]  # the stage's declared {cpus, gpus, memory_gb}
+    provenance: dict[str, Any]  # facts known before the step runs (engine, params, inputs ...)
+    replace: bool = False  # --force: install the new record even if one exists
     attempt: int = 1
     env: dict[str, str] = field(default_factory=dict)
-    modules: list[str] = field(default_factory=list)    # modules outside the project it imports
+    modules: list[str] = field(default_factory=list)  # modules outside the project it imports
 
 
 def step_env(resources: dict[str, Any]) -> dict[str, str]:
@@ -45,7 +46,7 @@ def step_env(resources: dict[str, Any]) -> dict[str, str]:
 
     n = str(max(1, min(int(resources.get("cpus", 1)), os.cpu_count() or 1)))
     env = {v: n for v in THREAD_VARS}
-    env.update({k: os.environ.get(k, v) for k, v in PINNED_ENV.items()})     # CPU-independent BLAS paths
+    env.update({k: os.environ.get(k, v) for k, v in PINNED_ENV.items()})  # CPU-independent BLAS paths
     if "OMP_WAIT_POLICY" in os.environ:
         env["OMP_WAIT_POLICY"] = os.environ["OMP_WAIT_POLICY"]
     else:

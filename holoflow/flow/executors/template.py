@@ -17,6 +17,7 @@ itself), then serves requests from the control socket, one at a time:
 Every child dies with the template (PR_SET_PDEATHSIG), the template with the runner (the same, set
 by the runner) and when the control socket closes. A crashing child never takes the template down.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -36,7 +37,7 @@ def serve(control_fd: int, modules: list[str], idle: list[str] = ()) -> None:
     ``idle`` modules are imported one at a time until the first request arrives: a template started
     ahead of its steps (``LocalExecutor.expect``) loads them off the run's critical path, one whose
     step is already waiting does not make it wait longer (its steps import them when they need them)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)        # Ctrl-C reaches the runner, which stops us
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the runner, which stops us
     for name in modules:
         _import(name)
     idle = list(idle)
@@ -44,7 +45,7 @@ def serve(control_fd: int, modules: list[str], idle: list[str] = ()) -> None:
     control = socket.socket(fileno=control_fd)
     sel = selectors.DefaultSelector()
     sel.register(control, selectors.EVENT_READ, "control")
-    steps: dict[int, tuple[socket.socket, int]] = {}     # pid -> (channel, pidfd)
+    steps: dict[int, tuple[socket.socket, int]] = {}  # pid -> (channel, pidfd)
     while True:
         events = sel.select(0 if idle else None)
         if not events and idle:
@@ -71,7 +72,7 @@ def serve(control_fd: int, modules: list[str], idle: list[str] = ()) -> None:
                 _send(chan, {"pid": pid})
             elif key.data[0] == "chan":
                 try:
-                    key.fileobj.recv(64)            # "kill", or b"" when the runner closed it
+                    key.fileobj.recv(64)  # "kill", or b"" when the runner closed it
                 except OSError:
                     pass
                 _kill(key.data[1])
@@ -84,8 +85,10 @@ def serve(control_fd: int, modules: list[str], idle: list[str] = ()) -> None:
                 os.close(pidfd)
                 if chan.fileno() in sel.get_map():
                     sel.unregister(chan)
-                _send(chan, {"status": status, "utime": usage.ru_utime, "stime": usage.ru_stime,
-                             "maxrss": usage.ru_maxrss})
+                _send(
+                    chan,
+                    {"status": status, "utime": usage.ru_utime, "stime": usage.ru_stime, "maxrss": usage.ru_maxrss},
+                )
                 chan.close()
 
 
@@ -93,7 +96,7 @@ def _import(name: str) -> None:
     try:
         importlib.import_module(name)
     except ImportError:
-        pass                        # not installed here: a step that needs it fails on its own
+        pass  # not installed here: a step that needs it fails on its own
 
 
 def _child(req: dict, out: int, inherited: list[int], libc) -> None:
@@ -102,7 +105,7 @@ def _child(req: dict, out: int, inherited: list[int], libc) -> None:
     try:
         parent = os.getppid()
         libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-        if os.getppid() != parent:                      # the template died before the line above
+        if os.getppid() != parent:  # the template died before the line above
             os._exit(1)
         program = req["program"]
         libc.prctl(PR_SET_NAME, os.path.basename(program).encode()[:15])
@@ -116,14 +119,14 @@ def _child(req: dict, out: int, inherited: list[int], libc) -> None:
         os.environ.clear()
         os.environ.update(req["env"])
         for name in [m for m in sys.modules if m == "holoflow" or m.startswith("holoflow.")]:
-            del sys.modules[name]       # the project's modules load fresh from disk, as the key says
+            del sys.modules[name]  # the project's modules load fresh from disk, as the key says
         sys.argv = [program, req["job"]]
         sys.path[0] = os.path.dirname(program)
         code = _run(program)
     except BaseException:
         import traceback
 
-        traceback.print_exc()           # becoming the step failed: say why in its log
+        traceback.print_exc()  # becoming the step failed: say why in its log
     finally:
         for stream in (sys.stdout, sys.stderr):
             try:
@@ -173,11 +176,11 @@ def _send(chan: socket.socket, payload: dict) -> None:
     try:
         chan.send(json.dumps(payload).encode())
     except OSError:
-        pass                        # the runner gave up on this step
+        pass  # the runner gave up on this step
 
 
 if __name__ == "__main__":
     args = sys.argv[2:]
     cut = args.index("--idle") if "--idle" in args else len(args)
-    serve(int(sys.argv[1]), args[:cut], args[cut + 1:])
-    os._exit(0)     # nothing to flush or clean up: skip tearing down torch & co (the run waits on it)
+    serve(int(sys.argv[1]), args[:cut], args[cut + 1 :])
+    os._exit(0)  # nothing to flush or clean up: skip tearing down torch & co (the run waits on it)

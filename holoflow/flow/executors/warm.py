@@ -8,6 +8,7 @@ closures name; the project's own modules load fresh in each child, so a step run
 key hashed. Templates are started from the run's scheduling thread (PR_SET_PDEATHSIG follows the
 thread that started a process) and stop when the run closes its executor or dies.
 """
+
 from __future__ import annotations
 
 import json
@@ -49,13 +50,13 @@ class WarmStep:
 
     def __init__(self, chan: socket.socket, stdout, pid: int):
         self._chan, self.stdout, self.pid = chan, stdout, pid
-        self.lost = False               # the template vanished before reporting the exit
+        self.lost = False  # the template vanished before reporting the exit
 
     def kill(self) -> None:
         try:
             self._chan.send(b"kill")
         except OSError:
-            pass                        # already reaped (the template closed the channel)
+            pass  # already reaped (the template closed the channel)
 
     def wait4(self) -> tuple[int, SimpleNamespace]:
         """(wait status, resource use) of the child, as the template reaped it."""
@@ -63,7 +64,7 @@ class WarmStep:
             msg = self._chan.recv(4096)
         finally:
             self._chan.close()
-        if not msg:                     # the template died; PR_SET_PDEATHSIG killed the child
+        if not msg:  # the template died; PR_SET_PDEATHSIG killed the child
             self.lost = True
             return signal.SIGKILL, SimpleNamespace(ru_utime=0.0, ru_stime=0.0, ru_maxrss=0)
         r = json.loads(msg)
@@ -76,9 +77,14 @@ class _Template:
         env = dict(os.environ, PYTHONUNBUFFERED="1", **threads_env)
         argv = [str(theirs.fileno()), *modules, *(["--idle", *idle] if idle else [])]
         with theirs:
-            self.proc = popen([sys.executable, "-m", "holoflow.flow.executors.template", *argv],
-                              pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                              cwd=HOLOFLOW_ROOT, env=env)
+            self.proc = popen(
+                [sys.executable, "-m", "holoflow.flow.executors.template", *argv],
+                pass_fds=(theirs.fileno(),),
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                cwd=HOLOFLOW_ROOT,
+                env=env,
+            )
 
     def alive(self) -> bool:
         return self.proc.poll() is None
@@ -99,12 +105,12 @@ class _Template:
         stdout = open(read, "rb")
         msg = mine.recv(4096)
         step = WarmStep(mine, stdout, json.loads(msg)["pid"] if msg else -1)
-        if not msg:                     # the template died before forking: no child, no output
+        if not msg:  # the template died before forking: no child, no output
             step.lost = True
         return step
 
     def close(self) -> None:
-        self.control.close()            # the template returns when its control socket closes
+        self.control.close()  # the template returns when its control socket closes
         try:
             self.proc.wait(timeout=5)
         except subprocess.TimeoutExpired:
@@ -132,7 +138,7 @@ class Launcher:
 
     def close(self) -> None:
         for t in self._templates.values():
-            t.control.close()           # every template leaves at once, then each is reaped
+            t.control.close()  # every template leaves at once, then each is reaped
         for t in self._templates.values():
             t.close()
         self._templates.clear()

@@ -1,6 +1,7 @@
 """Compile ahead (holoflow/flow/executors/ahead.py): the local executor starts one process for the steps to
 come, which calls each module's compile_ahead in order (the module found under its search root), and
 stops it when the run closes."""
+
 import time
 from pathlib import Path
 
@@ -18,7 +19,7 @@ def test_expect_compiles_the_modules_ahead_in_order(tmp_path):
     ex = LocalExecutor(warm=False)
     ex.expect([], [f"{tmp_path}:first", f"{tmp_path}:second"])
     proc = ex.ahead
-    ex.expect([], [f"{tmp_path}:second"])       # one process per run
+    ex.expect([], [f"{tmp_path}:second"])  # one process per run
     assert ex.ahead is proc
     assert proc.wait(timeout=60) == 0
     assert log.read_text() == "first second "

@@ -1,4 +1,5 @@
 """CPU kinds in records, the pinned BLAS / NumPy code paths of every step, the `status` bytes line."""
+
 from holoflow.flow.executors.step_env import PINNED_ENV, bytes_note, cpu_facts, cpu_kind, isa_class
 from holoflow.flow.executors.task import step_env  # the function (the package attribute may be the module)
 
@@ -10,7 +11,7 @@ V4 = V3 | {"avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl"}
 def test_isa_class_follows_the_psabi_levels():
     assert isa_class(set(), "x86_64") == "x86-64-v1"
     assert isa_class(V2, "x86_64") == "x86-64-v2"
-    assert isa_class(V3 | {"avx512f"}, "x86_64") == "x86-64-v3"          # one v4 flag is not v4
+    assert isa_class(V3 | {"avx512f"}, "x86_64") == "x86-64-v3"  # one v4 flag is not v4
     assert isa_class(V4 | {"avx512_bf16", "amx_tile"}, "x86_64") == "x86-64-v4+avx512_bf16+amx_tile"
     assert isa_class(V4, "aarch64") == "aarch64"
     facts = cpu_facts()
@@ -28,7 +29,7 @@ def test_every_step_gets_the_pins_unless_the_user_set_them(monkeypatch):
 
 def test_status_bytes_line_names_the_kinds():
     here = cpu_kind(cpu_facts())
-    assert bytes_note({"": ["a"]}) == ""                                  # records from before kinds
+    assert bytes_note({"": ["a"]}) == ""  # records from before kinds
     assert f"this machine's CPU kind ({here})" in bytes_note({here: ["a", "b"]})
     mixed = bytes_note({here: ["a"], "GenuineIntel x86-64-v3": ["b"]})
     assert "GenuineIntel x86-64-v3 (b)" in mixed and "docs/store.md" in mixed

@@ -1,5 +1,6 @@
 """Warm starts (holoflow/flow/executors/warm.py): a forked step behaves as an exec'd one, and a template
 survives its children's crashes."""
+
 import json
 import os
 import signal
@@ -47,9 +48,9 @@ def test_child_runs_like_a_script_with_fresh_project_code(tmp_path, launcher):
     assert code == 0 and seen["pid"] == step.pid != os.getpid()
     assert seen["argv"] == [str(tmp_path / "probe.py"), "job.json"] and seen["cwd"] == str(tmp_path)
     assert seen["path0"] == str(tmp_path) and seen["stage"] == "probe" and seen["omp"] == "1"
-    assert seen["numpy"] and seen["holoflow"] == []        # heavy modules preloaded; the project's not
+    assert seen["numpy"] and seen["holoflow"] == []  # heavy modules preloaded; the project's not
     assert usage.ru_maxrss > 0
-    (tmp_path / "helper.py").write_text("X = 2\n")        # edited between two steps: the next sees it
+    (tmp_path / "helper.py").write_text("X = 2\n")  # edited between two steps: the next sees it
     assert json.loads(_run(launcher, tmp_path / "probe.py")[2])["helper"] == 2
 
 
@@ -62,13 +63,16 @@ def test_threads_come_from_the_template_of_the_steps_cpus(tmp_path, launcher):
     assert json.loads(_run(launcher, tmp_path / "probe.py", cpus=2)[2])["omp"] == two["OMP_NUM_THREADS"]
 
 
-@pytest.mark.parametrize("body, code, text", [
-    ("raise SystemExit(3)", 3, ""),
-    ("import sys; sys.exit('probe: bad input')", 1, "probe: bad input"),
-    ("raise RuntimeError('boom')", 1, "RuntimeError: boom"),
-    ("import os, signal; os.kill(os.getpid(), signal.SIGSEGV)", -signal.SIGSEGV, ""),
-    ("import atexit; atexit.register(print, 'at exit')", 0, "at exit"),
-])
+@pytest.mark.parametrize(
+    "body, code, text",
+    [
+        ("raise SystemExit(3)", 3, ""),
+        ("import sys; sys.exit('probe: bad input')", 1, "probe: bad input"),
+        ("raise RuntimeError('boom')", 1, "RuntimeError: boom"),
+        ("import os, signal; os.kill(os.getpid(), signal.SIGSEGV)", -signal.SIGSEGV, ""),
+        ("import atexit; atexit.register(print, 'at exit')", 0, "at exit"),
+    ],
+)
 def test_a_crashing_step_leaves_the_template_serving(tmp_path, launcher, body, code, text):
     (tmp_path / "bad.py").write_text(body + "\n")
     (tmp_path / "ok.py").write_text("print('fine')\n")
@@ -88,14 +92,14 @@ def test_killed_template_takes_its_steps_along(tmp_path, launcher):
     template = launcher._templates[env["OMP_NUM_THREADS"]].proc
     template.kill()
     template.wait()
-    assert step.stdout.read() == b""                 # EOF: the step is gone
+    assert step.stdout.read() == b""  # EOF: the step is gone
     status, _ = step.wait4()
     assert step.lost and os.waitstatus_to_exitcode(status) == -signal.SIGKILL
     deadline = time.monotonic() + 10
     while _alive(step.pid):
         assert time.monotonic() < deadline, "step outlived its template"
         time.sleep(0.02)
-    launcher.ensure(step_env({"cpus": 1}), [])        # a dead template is replaced
+    launcher.ensure(step_env({"cpus": 1}), [])  # a dead template is replaced
     (tmp_path / "ok.py").write_text("print('fine')\n")
     assert _run(launcher, tmp_path / "ok.py")[1] == 0
 
@@ -103,7 +107,9 @@ def test_killed_template_takes_its_steps_along(tmp_path, launcher):
 def test_kill_reaches_the_step(tmp_path, launcher):
     (tmp_path / "slow.py").write_text("import time\nprint('up', flush=True)\ntime.sleep(60)\n")
     launcher.ensure(step_env({"cpus": 1}), [])
-    step = launcher.start(str(tmp_path / "slow.py"), "job.json", str(tmp_path), dict(os.environ, **step_env({"cpus": 1})))
+    step = launcher.start(
+        str(tmp_path / "slow.py"), "job.json", str(tmp_path), dict(os.environ, **step_env({"cpus": 1}))
+    )
     assert step.stdout.readline() == b"up\n"
     step.kill()
     assert step.stdout.read() == b""
@@ -130,7 +136,7 @@ def test_template_imports_first_use_modules_while_it_waits(tmp_path, launcher, m
     monkeypatch.setitem(warm.ON_FIRST_USE, "json", ("slow_first_use",))
     launcher.ensure(step_env({"cpus": 1}), ["json"])
     deadline = time.monotonic() + 30
-    while not (tmp_path / "imported").exists():            # imported before any step asked for it
+    while not (tmp_path / "imported").exists():  # imported before any step asked for it
         assert time.monotonic() < deadline
         time.sleep(0.05)
     assert _run(launcher, tmp_path / "probe.py")[2].strip() == "True"
@@ -144,7 +150,7 @@ def test_step_env_sets_threads_and_a_bounded_spin(monkeypatch):
     assert "OMP_WAIT_POLICY" not in env
     monkeypatch.setenv("GOMP_SPINCOUNT", "1000")
     assert step_env({"cpus": 1})["GOMP_SPINCOUNT"] == "1000"
-    monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")                 # the user's policy wins
+    monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")  # the user's policy wins
     env = step_env({"cpus": 1})
     assert env["OMP_WAIT_POLICY"] == "PASSIVE" and "GOMP_SPINCOUNT" not in env
     monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
