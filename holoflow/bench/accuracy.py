@@ -440,7 +440,8 @@ def tables(rows: list[dict], paper: dict | None, machine: str) -> str:
             f"| {r['point']} | {r['axis']} | {r['label']} | {_f(r['total_cpu_s'], 1)} | "
             f"{_f(r['total_wall_s'], 1)} | {_f(r['load1_before'], 1)} | {_f(r['abs_rel'], 4)} | "
             f"{_f(r['delta1'], 4)} | {_f(r['g0_base_psnr'])} | {_f(r['g1_base_psnr'])} | "
-            f"{_f(r['g1_base_ssim'], 4)} | {_f(r['g0_novel_psnr'])} | {_f(r['g1_novel_psnr'])} | {_f(r['g1_novel_ssim'], 4)} | "
+            f"{_f(r['g1_base_ssim'], 4)} | {_f(r['g0_novel_psnr'])} | {_f(r['g1_novel_psnr'])} | "
+            f"{_f(r['g1_novel_ssim'], 4)} | "
             f"{r['g1_gaussians']} | {r['ran'] or '(all cached)'} |"
         )
     out += [

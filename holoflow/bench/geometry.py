@@ -65,7 +65,8 @@ for name, (u, v) in cfg["views"].items():
     np.save(f"{sys.argv[1]}/{sys.argv[2]}_{name}.npy", img); np.save(f"{sys.argv[1]}/rays_{name}.npy", xyz)
     out[name] = t
 cube, t = timed(lambda: py360convert.e2c(pano, cfg["face"], cube_format="horizon"))
-np.save(f"{sys.argv[1]}/{sys.argv[2]}_cube.npy", cube); np.save(f"{sys.argv[1]}/rays_cube.npy", utils.xyzcube(cfg["face"]))
+np.save(f"{sys.argv[1]}/{sys.argv[2]}_cube.npy", cube)
+np.save(f"{sys.argv[1]}/rays_cube.npy", utils.xyzcube(cfg["face"]))
 out["cube"] = t
 out["version"] = py360convert.__version__ if hasattr(py360convert, "__version__") else "?"
 print(json.dumps(out))

@@ -21,7 +21,8 @@ network's.
 
 Images are compared in sRGB [0, 1] (the space Gaussians are trained in, holoflow.recon.views).
 Variants: ``full``; ``no_depth_filter`` (point_cloud.grad_threshold = 1e6: no point is dropped; the
-store's canonical JSON has no infinity); ``no_pcd_phase`` (pre_opt.pcd_iters = 0); ``no_pcd_and_filter`` (both); ``no_inp`` (transfer_opt.use_inp = false:
+store's canonical JSON has no infinity); ``no_pcd_phase`` (pre_opt.pcd_iters = 0); ``no_pcd_and_filter`` (both);
+``no_inp`` (transfer_opt.use_inp = false:
 transfer on the PANO set only). The paper's Table III rows are full, w/o initial (= no_pcd_phase),
 w/o filter (= no_depth_filter) and w/o initial & filter (= no_pcd_and_filter).
 """

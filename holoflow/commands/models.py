@@ -112,8 +112,8 @@ def main(argv: list[str]) -> int:
     print(
         f"holoflow models: {sum(n.present for n in found)} of {len(found)} present"
         + (
-            f"; without weights: `holoflow models random DIR` then `holoflow run --models DIR` gives the "
-            f"real compute cost with noise images"
+            "; without weights: `holoflow models random DIR` then `holoflow run --models DIR` gives the "
+            "real compute cost with noise images"
             if missing
             else ""
         )

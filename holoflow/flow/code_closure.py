@@ -5,7 +5,8 @@ A program's import closure is, transitively: ``import a.b`` (a and a.b), ``from 
 a.b when b is a submodule), relative imports, imports inside functions or ``try`` blocks (not under
 ``if TYPE_CHECKING:``, which never runs), and the ``__init__.py`` of every package on the way. A
 package whose ``__init__`` defines a module-level ``__getattr__`` (PEP 562 lazy names, e.g.
-holoflow/scene) counts as importing all its direct submodules. Modules are looked up in the search roots in order, as Python would for a script: the
+holoflow/scene) counts as importing all its direct submodules. Modules are looked up in the search roots in order, as
+Python would for a script: the
 program's folder, then the pipeline's folder, then the folder holding the ``holoflow`` package (for
 ``holoflow`` only). Standard-library and third-party modules are outside the roots and not followed;
 names built at run time (``importlib.import_module(name)``) are not, except one form: a string literal

@@ -17,7 +17,8 @@ footprint, projected along the ray onto it (``surface_footprint``), so neighbour
 seen from an eye off the centre.
 
 **Polar caps** (``PolarCaps``). A photo's rows near a pole are still W px round and its rows finer
-than P_f's, so a view of the zenith or nadir resolves detail that one point per d x d loses. Beyond a latitude (P_f keeps its
+than P_f's, so a view of the zenith or nadir resolves detail that one point per d x d loses. Beyond a latitude (P_f
+keeps its
 rows up to ``from_deg``; the caps start at the first row of their grid that reaches past P_f's last
 row's edge, so the two touch) the caps are sampled from the panorama on a grid ``density`` times finer
 than P_f's (rows at most twice the panorama's own) with ``density`` times P_f's points along each ring

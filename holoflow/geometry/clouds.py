@@ -181,7 +181,8 @@ def sky_dome(rgb: torch.Tensor, sky: torch.Tensor, radius: float, width: int) ->
 def fill_from(values: torch.Tensor, known: torch.Tensor) -> torch.Tensor:
     """values [H, W, C] with the pixels where known [H, W] is False filled from the known ones (pull-push:
     averages over ever coarser grids, columns wrapping, then back down, each pixel taking the finest
-    level that knows it; the coarsest level's unknown pixels the mean). Every pixel is known when any is; otherwise values come back unchanged."""
+    level that knows it; the coarsest level's unknown pixels the mean). Every pixel is known when any is; otherwise
+    values come back unchanged."""
     if bool(known.all()) or not bool(known.any()):
         return values
     w = known.to(values.dtype)[..., None]

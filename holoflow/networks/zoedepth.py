@@ -4,7 +4,8 @@ The model folder (or cached id, default ``Intel/zoedepth-nyu-kitti``) carries it
 preprocessing (``preprocessor_config.json``: resize keeping aspect, reflect padding); the PIL image
 processor is used (no torchvision). Its post-processing is redone here in torch (transformers'
 PIL post-processor calls torchvision): resize to the padded input size, crop the reflect padding
-ZoeDepth adds (``int(sqrt(side / 2) * 3)`` px per side); depths are floored at 1 mm. As in ZoeDepth's own evaluation, the prediction is averaged with that of the mirrored
+ZoeDepth adds (``int(sqrt(side / 2) * 3)`` px per side); depths are floored at 1 mm. As in ZoeDepth's own evaluation,
+the prediction is averaged with that of the mirrored
 image. Output: perspective z depth in metres (distance along the optical axis, not along the ray).
 """
 

@@ -66,7 +66,8 @@ def init_model(
 def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
     """``init_model``'s footprint for the P_f of a point_cloud output folder: (its pf.json's angular
     spacing, cfg.footprint_width, cfg.footprint_thickness, its polar caps or None, the point count of its
-    background layer and sky dome (its last points) and their spacing per point, the rasterizer's low-pass at its viewing size in radians^2, its
+    background layer and sky dome (its last points) and their spacing per point, the rasterizer's low-pass at its
+    viewing size in radians^2, its
     pf.ply's normals [N, 3] with ``footprint_orient: surface`` (else None: discs face the centre) and
     cfg.footprint_max_stretch), or None with ``init_scale: knn`` or no pf.json (a cloud of the user's own)."""
     import json

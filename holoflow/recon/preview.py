@@ -64,7 +64,8 @@ def render_at(model, viewmats: torch.Tensor, K: torch.Tensor, size: int, backend
 def write_previews(
     model, folder: str | Path, K: torch.Tensor, backend: str, size: int, strip_views: int = 8, gif_frames: int = 24
 ) -> list[Path]:
-    """``size`` x ``size`` px renders (transfer_opt's ``preview_size``): previews/look_around.png (``strip_views`` level views side by side, then the same pitched
+    """``size`` x ``size`` px renders (transfer_opt's ``preview_size``): previews/look_around.png (``strip_views``
+    level views side by side, then the same pitched
     +-45 deg in rows above / below) and previews/look_around.gif (``gif_frames`` level views).
     Returns the written paths."""
     folder = Path(folder)

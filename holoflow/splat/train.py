@@ -109,7 +109,8 @@ def train(
 ) -> dict:
     """Optimise ``model`` in place on ``views`` (dicts: image [H, W, 3] float linear, mask [H, W] or
     None, viewmat [4, 4] world-to-camera, K [3, 3]). ``progress(done, total, "iters")`` is called every
-    step (holoflow.stage.Progress). Returns a JSON-able log: per-step loss, Gaussian count after each densification, timings, notes."""
+    step (holoflow.stage.Progress). Returns a JSON-able log: per-step loss, Gaussian count after each densification,
+    timings, notes."""
     cfg = cfg or TrainConfig()
     if not views:
         raise ValueError("train: no views")

@@ -328,7 +328,7 @@ def test_stages_write_contract_and_metrics(tmp_path, room_pano):
     assert sorted(read_exr(td / "faces" / "face_07.exr")[0]) == ["aligned.Y", "raw.Y"]
     assert "rel_rms" in json.loads((td / "alignment.json").read_text())["residuals"]
     assert "truth_oracle_affine" in proc.stdout
-    prog = [json.loads(l[10:]) for l in proc.stdout.splitlines() if l.startswith("@progress ")]
+    prog = [json.loads(line[10:]) for line in proc.stdout.splitlines() if line.startswith("@progress ")]
     assert prog and prog[-1] == {"done": 20, "total": 20, "what": "faces"}
     proc, ma = _run_stage(
         tmp_path,
@@ -342,7 +342,7 @@ def test_stages_write_contract_and_metrics(tmp_path, room_pano):
     assert attrs["holoflow.depth_kind"] == "radial" and (ch["Z"] > 0).all()
     rep = json.loads((ma / "metric_align.json").read_text())
     assert rep["truth_metrics"]["abs_rel"] < 0.15 and len(rep["faces"]) == 4
-    meta = [json.loads(l[6:]) for l in proc.stdout.splitlines() if l.startswith("@meta ")]
+    meta = [json.loads(line[6:]) for line in proc.stdout.splitlines() if line.startswith("@meta ")]
     assert meta and "truth_metrics" in meta[0]
 
 

@@ -24,7 +24,6 @@ def _room(H=128, W=256, wall=3.0, h=1.6, ceiling=1.2, lines=4):
     """A linear RGB box-room panorama: grey floor, beige walls with dark vertical corner lines, white
     ceiling, a dark skirting line; and its radial depth (a cylinder room)."""
     lat = np.pi / 2 - np.pi * (np.arange(H) + 0.5) / H
-    lon = 2 * np.pi * (np.arange(W) + 0.5) / W - np.pi
     L = lat[:, None] * np.ones((1, W))
     lat_f, lat_c = -np.arctan(h / wall), np.arctan(ceiling / wall)
     img = np.zeros((H, W, 3), np.float32)

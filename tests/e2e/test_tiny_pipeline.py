@@ -1,4 +1,5 @@
-"""The real thirteen-stage pipeline (the paper's twelve and export), end to end, in the `tiny` profile, through the `holoflow` command.
+"""The real thirteen-stage pipeline (the paper's twelve and export), end to end, in the `tiny` profile, through the
+`holoflow` command.
 
 Two runs into two separate stores must produce byte-identical artifacts (every random choice is
 seeded), a rerun must be fully cached, and the final scene must be a readable 3DGS PLY.

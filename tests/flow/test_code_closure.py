@@ -36,7 +36,9 @@ def test_closure_follows_every_import_form(tmp_path):
             "pkg/deep/leaf.py": "from .. import mod\n\ndef f():\n    pass\n",
             "pkg/sub.py": "",
             "pkg/unused.py": "",
-            "lazy/__init__.py": "def __getattr__(name):\n    import importlib\n    return importlib.import_module(name)\n",
+            "lazy/__init__.py": (
+                "def __getattr__(name):\n    import importlib\n    return importlib.import_module(name)\n"
+            ),
             "lazy/a.py": "",
             "lazy/b/__init__.py": "",
             "other.py": "",

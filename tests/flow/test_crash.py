@@ -98,7 +98,7 @@ def test_killed_step_is_redone_alone(project, capsys, launch):
 @LAUNCH
 def test_killed_runner_mid_step(project, capsys, launch):
     proc = project.proc("run", "p", "--set", "upper.sleep=30", *launch)
-    step = _wait_for_step(project, proc, "upper")
+    _wait_for_step(project, proc, "upper")
     others = [pid for pid, _, _ in _descendants(proc.pid)]
     assert len(others) == (1 if launch else 2)  # the step (and its warm template)
     proc.send_signal(signal.SIGKILL)

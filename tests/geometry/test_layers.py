@@ -147,7 +147,8 @@ def test_box_in_front_of_wall_no_hole_half_a_metre_off(with_layer):
 @pytest.mark.parametrize("with_layer", [True, False])
 def test_box_scene_after_a_tiny_optimisation(with_layer):
     """Gaussians from P_f (+ layer), sized by their pixel's footprint as the trainers do, 30 steps on
-    the panorama's base views (holoflow's CPU rasterizer), rendered 0.5 m right of the centre: alpha >= 0.5 on every pixel the box hides from the centre with
+    the panorama's base views (holoflow's CPU rasterizer), rendered 0.5 m right of the centre: alpha >= 0.5 on every
+    pixel the box hides from the centre with
     the layer; without it a good part of them stays empty (training from the centre cannot fill them)."""
     from holoflow.geometry.rigs import base_rig
     from holoflow.geometry.sampling import equirect_to_pinhole
