@@ -119,7 +119,7 @@ def segment_evidence(
         row = np.clip(((np.pi / 2 - lat) / np.pi * H).astype(int), 0, H - 1)
         target = below if mid_lat[i] < 0 else above
         idx = np.unique(row * W + col)
-        target[fam[i]].reshape(-1)[idx] += 1.0  # noqa: the reshape of a C-contiguous slice is a view
+        target[fam[i]].reshape(-1)[idx] += 1.0  # the reshape of a C-contiguous slice is a view
     return np.minimum(below, 1.0), np.minimum(above, 1.0)
 
 
