@@ -19,6 +19,9 @@ def main(argv: list[str]) -> int:
 
     pipe, store = load(args)
     ctx = Context.build(pipe, store, options(args))
+    from holoflow.networks.manifest import fill_auto
+
+    fill_auto(ctx.resolved)  # as `run` does: an auto engine's network found in the cache is part of the key
     st = status(ctx)
     kinds = cpu_kinds(store, st)
     if args.json:

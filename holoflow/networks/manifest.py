@@ -74,6 +74,22 @@ def auto_network(r: "Resolved") -> tuple[str, str, str] | None:
     return getattr(config, "AUTO_NETWORK", None)
 
 
+def _in_hf_cache(model: str) -> bool:
+    """Whether the Hugging Face hub cache (HF_HUB_CACHE, else HF_HOME/hub, else
+    XDG_CACHE_HOME/huggingface/hub, else ~/.cache/huggingface/hub) has a folder for the model id."""
+    import os
+
+    if model.count("/") != 1:
+        return False
+    hub = os.environ.get("HF_HUB_CACHE")
+    if not hub:
+        home = os.environ.get("HF_HOME") or os.path.join(
+            os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "huggingface"
+        )
+        hub = os.path.join(home, "hub")
+    return os.path.isdir(os.path.join(os.path.expanduser(hub), "models--" + model.replace("/", "--"), "snapshots"))
+
+
 def needs(resolved: dict[str, "Resolved"], optional: bool = False) -> list[ModelNeed]:
     """Every model the resolved stages' engines load (with ``optional``, also the network of each ``auto``
     engine: ``ModelNeed.optional``), looked up locally (no download, no network)."""
@@ -115,12 +131,13 @@ def needs(resolved: dict[str, "Resolved"], optional: bool = False) -> list[Model
 
 def fill_auto(resolved: dict[str, "Resolved"]) -> None:
     """Each ``auto`` engine's empty network param becomes the local path of its default weights when they
-    are in the user's Hugging Face cache (in place; before the cache key is made). Downloads nothing."""
-    from .weights import MissingWeights, resolve
+    are in the user's Hugging Face cache (in place; before the cache key is made). Downloads nothing, and
+    imports huggingface_hub only when the cache holds the model's folder (``holoflow status`` stays light)."""
+    from .weights import DEFAULTS, MissingWeights, resolve
 
     for name, r in resolved.items():
         auto = auto_network(r)
-        if auto is None or r.params[auto[0]]:
+        if auto is None or r.params[auto[0]] or not _in_hf_cache(DEFAULTS.get(auto[1], "")):
             continue
         try:
             r.params[auto[0]] = str(resolve("", auto[1], f"{name}.{auto[0]}"))

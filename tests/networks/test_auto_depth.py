@@ -162,6 +162,9 @@ def test_photo_run_picks_the_network_from_the_hf_cache_and_layout_without(tiny_d
     )
     meta = step_meta(store, "tangent_depth")
     assert meta["engine"]["engine"] == "depth_anything" and REPO.replace("/", "--") in meta["engine"]["model"]
+    status = holoflow("status", *args[1:6], "--store", str(store), "--json", hf_home=hf)
+    assert status.returncode == 0, status.stderr[-2000:]
+    assert json.loads(status.stdout)["stages"]["tangent_depth"]["state"] == "fresh"  # the key run made
 
     empty = holoflow(*args, hf_home=tmp_path / "empty")
     assert empty.returncode == 0, empty.stderr[-2000:]
