@@ -1,5 +1,5 @@
 """`holoflow bench accuracy --profiles P1,P2,...`: the profiles on the accuracy-vs-time curve, scored
-where people look (issue 31).
+where people look.
 
 Each named profile runs, through the real runner into one shared store, on procedural scenes (a
 prompt each; the source is the detail panorama, and novel views have truth) and on the photos of a
@@ -272,7 +272,7 @@ def markdown(
         )
     lines += [
         "",
-        "Goals (issue 31): "
+        "Goals: "
         + "; ".join(
             f"{p}: " + ", ".join(f"{k} {'>=' if k == 'psnr' else '<='} {v}" for k, v in g.items())
             for p, g in GOALS.items()

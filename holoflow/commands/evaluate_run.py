@@ -5,7 +5,7 @@ scene or a user's own panorama given by ``--use base_pano=FILE``) where a viewer
   final scene at the base cameras against the source's own views (the photo itself for a photo), the
   zenith / nadir cameras apart, NIQE / BRISQUE ratios render / source, and novel cameras 0.25 / 0.5 /
   1 m off the centre looking sideways and back at the depth's edges: their empty (alpha < 0.5) and
-  cracked (alpha < 0.9) fractions and NIQE / BRISQUE against the source's views; beside issue 31's goals.
+  cracked (alpha < 0.9) fractions and NIQE / BRISQUE against the source's views; beside the profile's goals.
 - With ``--truth DIR`` (a truth set, docs/truth-sets.md): the scene at each truth view's camera, per
   ring PSNR / SSIM, depth AbsRel / delta < 1.25, empty and cracked fractions
   (holoflow.evaluation.truth_scores), and one truth | render picture per ring.

@@ -1,4 +1,4 @@
-"""What people see: a finished scene scored at a viewing size (issue 31).
+"""What people see: a finished scene scored at a viewing size.
 
 The paper's Table II protocol taken where a viewer looks, not at the training size:
 
@@ -61,7 +61,7 @@ class ViewingSpec:
     novel_nr: bool = True
 
 
-# Goals of issue 31 per profile: psnr (dB, at least), brisque / niqe (ratio render / source, at most),
+# Goals per profile: psnr (dB, at least), brisque / niqe (ratio render / source, at most),
 # polar_gap (dB, at most), empty_0.5 (novel cameras 0.5 m off centre, fraction, at most), seconds
 # (end to end on a 2-core CPU, the paper's on a GPU; checked by the profile bench, at most).
 GOALS = {
@@ -531,7 +531,7 @@ def _ok(value, goal, at_most: bool) -> str:
 
 def table(scores: dict, profile: str | None) -> list[str]:
     """The viewing-size table as text lines: each measured figure with the run profile's goal and
-    whether it is met (issue 31's goals, ``GOALS``)."""
+    whether it is met (``GOALS``)."""
     name, g = goals_for(profile)
     s, b, nr, nv = scores["spec"], scores["base"], scores["nr"], scores["novel"]
     rows = []
