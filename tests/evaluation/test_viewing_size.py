@@ -1,4 +1,4 @@
-"""holoflow.evaluation.viewing_size: the viewing-size scorer (issue 31) on cases whose answer is known."""
+"""holoflow.evaluation.viewing_size: the viewing-size scorer on cases whose answer is known."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""No rings at the poles (issue 31): a constant-colour room made into Gaussians by the project's own
+"""No rings at the poles: a constant-colour room made into Gaussians by the project's own
 path (point_cloud's P_f sampling, the trainers' initial Gaussians, their default params) and seen
 straight up and straight down at the paper's view size is covered everywhere, in the right colour."""
 

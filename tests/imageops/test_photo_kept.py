@@ -1,4 +1,4 @@
-"""A user's photo stays their photo on its way to the detail panorama (issue 31): the real stages
+"""A user's photo stays their photo on its way to the detail panorama: the real stages
 (stylize, upscale, detail) run through `holoflow run --use base_pano=PHOTO --until detail`."""
 
 import json
