@@ -46,6 +46,7 @@ from holoflow.geometry.pointcloud import (
 from holoflow.geometry.sampling import resize_equirect
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.geometry.surfaces import smooth_depth, surface_normals
+from holoflow.imageops.color import linear_to_srgb_torch
 
 
 @dataclass
@@ -74,7 +75,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
     depth = radial_depth.double()
     sky_fraction = float((~(torch.isfinite(depth) & (depth > 0))).double().mean())
     shell = cfg.sky_radius if cfg.sky_radius > 0 else far_shell_radius(depth)
-    srgb = _srgb(rgb)
+    srgb = linear_to_srgb_torch(rgb)  # clamped to [0, 1] first
     pf_width = cfg.pf_width or min(rgb.shape[1], view_width(cfg.view_size, cfg.view_fov_deg), cfg.pf_max_width)
     clouds, counts, extra = {}, {}, {}
     for i, (name, width) in enumerate({"p0": cfg.p0_width, "pf": pf_width, "ps": cfg.ps_width}.items()):
@@ -142,7 +143,7 @@ def _pf_cloud(
             cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)
             caps, detail = called_for(caps, cap_rgb, col.shape[1], cfg.pf_polar_detail)
             detail = {k: float(f"{v:.4g}") for k, v in detail.items()}
-        xyz, c, pixel = equirect_to_area_points(col, d, caps, cap_rgb if caps is not None else None)
+        xyz, c, pixel = equirect_to_area_points(col, d, caps, cap_rgb)
         n = normals.reshape(-1, 3)[pixel]
     else:
         xyz, c = equirect_to_points(col, d)
@@ -207,13 +208,6 @@ def fill_from(values: torch.Tensor, known: torch.Tensor) -> torch.Tensor:
 def _sum_2x2(x: torch.Tensor) -> torch.Tensor:
     """[2h, 2w, C] -> [h, w, C]: sums of 2 x 2 blocks."""
     return x.reshape(x.shape[0] // 2, 2, x.shape[1] // 2, 2, -1).sum((1, 3))
-
-
-def _srgb(linear: torch.Tensor) -> torch.Tensor:
-    """[H, W, 3] linear light -> sRGB in [0, 1] (holoflow/imageops/color.py)."""
-    from holoflow.imageops.color import linear_to_srgb_torch
-
-    return linear_to_srgb_torch(linear.clamp(0, 1))
 
 
 def _to_u8(c: torch.Tensor) -> torch.Tensor:

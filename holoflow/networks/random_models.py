@@ -167,6 +167,16 @@ def save_lama(path: Path, full: bool = False, seed: int = 0) -> Path:
     return path
 
 
+# Depth Anything sizes: (backbone width, layers, heads, layers whose features the DPT head takes, neck
+# widths, fusion width, head width, input side px). large = ViT-L/14 (v1 / V2 Large), small = ViT-S/14
+# (V2 Small), tiny = the same classes for tests.
+DEPTH_ANYTHING_SIZES = {
+    "large": (1024, 24, 16, (5, 12, 18, 24), [256, 512, 1024, 1024], 256, 32, 518),
+    "small": (384, 12, 6, (3, 6, 9, 12), [48, 96, 192, 384], 64, 32, 518),
+    "tiny": (16, 4, 2, (1, 2, 3, 4), [8, 8, 16, 16], 8, 8, 56),
+}
+
+
 def save_depth_anything(folder: Path, full: bool = False, seed: int = 0, variant: str = "small") -> Path:
     """Depth Anything (DINOv2 backbone + DPT head) folder with its preprocessor config. ``full``: the
     published size of ``variant`` "small" (V2 Small: ViT-S/14, 24.8 M parameters, the default model) or
@@ -174,66 +184,28 @@ def save_depth_anything(folder: Path, full: bool = False, seed: int = 0, variant
     import torch
     from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config, DPTImageProcessorPil
 
-    torch.manual_seed(seed)
-    if full and variant == "large":  # ViT-L/14, features from layers 5, 12, 18, 24
-        backbone = Dinov2Config(
-            hidden_size=1024,
-            num_hidden_layers=24,
-            num_attention_heads=16,
-            intermediate_size=4096,
-            image_size=518,
-            patch_size=14,
-            reshape_hidden_states=False,
-            out_features=["stage5", "stage12", "stage18", "stage24"],
-        )
-        cfg = DepthAnythingConfig(
-            backbone_config=backbone,
-            reassemble_hidden_size=1024,
-            fusion_hidden_size=256,
-            neck_hidden_sizes=[256, 512, 1024, 1024],
-            head_hidden_size=32,
-        )
-        side = 518
-    elif full and variant == "small":  # V2 Small: ViT-S/14, features from layers 3, 6, 9, 12
-        backbone = Dinov2Config(
-            hidden_size=384,
-            num_hidden_layers=12,
-            num_attention_heads=6,
-            intermediate_size=1536,
-            image_size=518,
-            patch_size=14,
-            reshape_hidden_states=False,
-            out_features=["stage3", "stage6", "stage9", "stage12"],
-        )
-        cfg = DepthAnythingConfig(
-            backbone_config=backbone,
-            reassemble_hidden_size=384,
-            fusion_hidden_size=64,
-            neck_hidden_sizes=[48, 96, 192, 384],
-            head_hidden_size=32,
-        )
-        side = 518
-    elif full:
+    size = "tiny" if not full else variant
+    if size not in DEPTH_ANYTHING_SIZES:
         raise ValueError(f"unknown Depth Anything variant {variant!r}; use small or large")
-    else:
-        backbone = Dinov2Config(
-            hidden_size=16,
-            num_hidden_layers=4,
-            num_attention_heads=2,
-            intermediate_size=32,
-            image_size=56,
-            patch_size=14,
-            reshape_hidden_states=False,
-            out_features=["stage1", "stage2", "stage3", "stage4"],
-        )
-        cfg = DepthAnythingConfig(
-            backbone_config=backbone,
-            reassemble_hidden_size=16,
-            neck_hidden_sizes=[8, 8, 16, 16],
-            fusion_hidden_size=8,
-            head_hidden_size=8,
-        )
-        side = 56
+    hidden, layers, heads, taps, neck, fusion, head, side = DEPTH_ANYTHING_SIZES[size]
+    torch.manual_seed(seed)
+    backbone = Dinov2Config(
+        hidden_size=hidden,
+        num_hidden_layers=layers,
+        num_attention_heads=heads,
+        intermediate_size=4 * hidden if full else 2 * hidden,
+        image_size=side,
+        patch_size=14,
+        reshape_hidden_states=False,
+        out_features=[f"stage{k}" for k in taps],
+    )
+    cfg = DepthAnythingConfig(
+        backbone_config=backbone,
+        reassemble_hidden_size=hidden,
+        fusion_hidden_size=fusion,
+        neck_hidden_sizes=neck,
+        head_hidden_size=head,
+    )
     net = DepthAnythingForDepthEstimation(cfg)
     with torch.no_grad():
         net.head.conv3.bias.fill_(0.5)  # random init + the final ReLU would give all-zero disparity
