@@ -1,7 +1,8 @@
 """metric_align: metric depth (engine) on a seeded random subset of ``faces`` tangent faces, turned
 into radial disparity references; one global scale + offset maps the blended disparity onto them
 (Huber IRLS on relative residuals); blended pixels at the sky's border that are mostly sky are made
-sky (docs/depth.md, step 6). Writes depth.exr (Z = radial metres, +inf sky) and
+sky (docs/depth.md, step 6); a network's depth is then straightened by the room's planes
+(holoflow/depth/planes.py, param ``planes``). Writes depth.exr (Z = radial metres, +inf sky) and
 metric_align.json (scale, offset, residuals, faces used); with a truth depth it records AbsRel,
 RMSE and delta1 of the result (docs/depth.md). Engine ``given`` (``auto`` on a panorama imported with its
 own Z channel): the given Z, resized to the disparity's grid (nearest), is the depth as it is."""
@@ -23,7 +24,7 @@ def main() -> int:
     from holoflow.io.exr import write_exr
 
     cfg = job.config(MetricAlignParams)
-    disparity = read_disparity(job.input_file("disparity", "disparity.exr"))
+    disparity, relative_engine = read_disparity(job.input_file("disparity", "disparity.exr"))
     pano = resize_pano(read_pano(job.input_file("pano", "pano.exr")), disparity.shape[1])
     truth = read_truth(job.inputs.get("truth"))
     engine, why = resolve_engine(
@@ -36,7 +37,9 @@ def main() -> int:
         facts = {"engine": "given", "why": why, "note": "the imported panorama's own Z channel, kept as the depth"}
         report = {"engine": facts, "faces": []}
     else:
-        result = pd.metric_from_disparity(disparity, pano, truth, engine, cfg, job.seed, job.device, job.progress)
+        result = pd.metric_from_disparity(
+            disparity, pano, truth, engine, cfg, job.seed, job.device, job.progress, relative_engine=relative_engine
+        )
         depth, facts = result.depth, {**result.engine, "why": why}
         report = {"engine": facts, "faces": result.faces, **result.fit}
         if truth is not None:

@@ -28,11 +28,12 @@ def read_truth(folder: str | Path | None, name: str = "pano.exr") -> np.ndarray 
     return np.where(np.isnan(z) | (z <= 0), np.inf, z)
 
 
-def read_disparity(path: str | Path) -> np.ndarray:
-    """Relative disparity [H, W] (Y channel) of a tangent_depth output; raises ValueError if absent."""
+def read_disparity(path: str | Path) -> tuple[np.ndarray, str]:
+    """Relative disparity [H, W] (Y channel) of a tangent_depth output and the engine that made it (its
+    header's ``holoflow.engine``, "" if unnamed); raises ValueError if the Y channel is absent."""
     from holoflow.io.exr import read_exr
 
-    channels, _ = read_exr(path)
+    channels, attrs = read_exr(path)
     if "Y" not in channels:
         raise ValueError(f"{path}: no Y channel (expected tangent_depth's disparity.exr)")
-    return channels["Y"].astype(np.float64)
+    return channels["Y"].astype(np.float64), str(attrs.get("holoflow.engine", ""))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from holoflow.depth import planes
 from holoflow.depth.accuracy import depth_metrics
 from holoflow.depth.config import MetricAlignParams, TangentDepthParams
 from holoflow.depth.engines import resolve_engine
@@ -167,10 +168,13 @@ def metric_from_disparity(
     seed: int = 0,
     device: str = "cpu",
     progress: Progress = None,
+    relative_engine: str = "",
 ) -> MetricDepth:
     """Metric radial depth from a relative disparity [H, W] and metric depth (``engine``, a name in
     ``MetricAlignParams.ENGINES``; ``auto`` resolves by ``resolve_engine``) on a seeded subset of
-    cfg.faces faces, with metric_align's ``cfg``."""
+    cfg.faces faces, with metric_align's ``cfg``; then straightened by the room's planes when
+    ``cfg.planes`` asks for it for the ``relative_engine`` that made the disparity
+    (holoflow.depth.planes)."""
     engine, why = resolve_engine(engine, truth is not None)
     size = cfg.face_size
     faces = icosahedron_faces(size, cfg.padding)
@@ -198,6 +202,8 @@ def metric_from_disparity(
     if limit is not None:  # what the metric engine calls sky starts there in the aligned disparity
         depth = np.where(fit["scale"] * disparity + fit["offset"] < limit, np.inf, depth)
     depth = sky_mixed_edges(depth)
+    if planes.wanted(cfg.planes, relative_engine):
+        depth, fit["planes"] = planes.refine_with_planes(depth)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
 
 

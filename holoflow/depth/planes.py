@@ -1,0 +1,251 @@
+"""Planar refinement of a network's metric panorama depth: the room's large planes straighten it.
+
+A monocular network's depth is off by a smooth, low-frequency bias (a wall bends by several per cent)
+on top of its pixel noise; seen from the centre that is invisible, but one step away every texture on
+the bent wall swims by pixels. Indoors most pixels lie on a few large planes whose orientations follow
+the room (Manhattan: a floor and ceiling, walls along two horizontal axes). This module finds those
+planes in the depth itself, takes the ratio plane / depth on their pixels as a sample of the bias,
+spreads it smoothly over the panorama (objects in front of a wall get the wall's correction, as the
+bias is regional), and lays the plane pixels exactly on their planes.
+
+Arrays: radial depth [H, W] metres (+inf sky), equirect, world axes of docs/conventions (+y down).
+Planes: ``axis`` a unit world vector [3] and ``offset`` s (metres) with p . a = s for the points p.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: the planes' search: a plane gets pixels whose normal is within ``normal_deg`` of its axis and
+#: whose depth is within ``tol`` (relative) of it; a plane needs ``min_support`` of the panorama's
+#: solid angle; offsets closer than ``min_offset`` metres to the eye are not planes of the room
+NORMAL_DEG = 25.0
+MIN_SUPPORT = 0.01
+MIN_OFFSET = 0.2
+MAX_PLANES = 12
+MIN_CONTACTS = 20
+#: the planes must cover this share of the sphere for the scene to be a room (else nothing is changed)
+MIN_ROOM = 0.3
+#: relative engines whose depth carries a network's low-frequency bias (``planes: auto`` straightens it)
+BIASED_ENGINES = ("depth_anything", "simulated")
+
+
+def wanted(mode: str, relative_engine: str) -> bool:
+    """Whether metric_align straightens the depth: ``mode`` on / off, or auto (a network's depth)."""
+    return mode == "on" or (mode == "auto" and relative_engine in BIASED_ENGINES)
+
+
+def room_axes(normals: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The room's three axes [3, 3] (rows: vertical (0, 1, 0), then the two horizontal wall axes) from
+    unit normals [H, W, 3] weighted by [H, W]: the wall normals' dominant direction modulo 90 deg
+    (circular mean of 4 x their heading)."""
+    n = normals.reshape(-1, 3)
+    w = weight.reshape(-1) * (np.abs(n[:, 1]) < np.sin(np.radians(NORMAL_DEG)))  # wall-like normals
+    heading = np.arctan2(n[:, 0], n[:, 2])
+    z = np.sum(w * np.exp(4j * heading))
+    yaw = float(np.angle(z) / 4.0) if abs(z) > 0 else 0.0
+    a = np.array([np.sin(yaw), 0.0, np.cos(yaw)])
+    b = np.array([np.cos(yaw), 0.0, -np.sin(yaw)])
+    return np.stack([np.array([0.0, 1.0, 0.0]), a, b])
+
+
+def find_planes(points: np.ndarray, normals: np.ndarray, weight: np.ndarray, axes: np.ndarray, tol: float) -> list:
+    """Planes ``(axis [3], offset m, support)`` of points [N, 3] with unit normals [N, 3] and solid-angle
+    weights [N] (summing to the panorama's share): along each axis, the heaviest offset (a histogram
+    peak) whose pixels within ``tol`` (relative) carry ``MIN_SUPPORT``, its offset the weighted median of
+    those pixels; taken greedily, the pixels of each plane removed before the next, at most
+    ``MAX_PLANES``."""
+    cos_lim = np.cos(np.radians(NORMAL_DEG))
+    free = np.ones(len(points), bool)
+    planes = []
+    while len(planes) < MAX_PLANES:
+        best = None
+        for axis in axes:
+            facing = free & (np.abs(normals @ axis) > cos_lim)
+            s = points[facing] @ axis  # [M] signed offsets
+            if s.size == 0:
+                continue
+            far = np.abs(s) > MIN_OFFSET
+            s, w = s[far], weight[facing][far]
+            if s.size == 0:
+                continue
+            ls = np.sign(s) * np.log(np.abs(s))  # relative tolerance = a fixed width in log offset
+            bins = np.arange(ls.min() - tol, ls.max() + 2 * tol, tol / 4)
+            hist, _ = np.histogram(ls, bins, weights=w)
+            run = np.convolve(hist, np.ones(8), mode="same")  # window of width 2 tol
+            k = int(np.argmax(run))
+            if best is None or run[k] > best[0]:
+                best = (run[k], axis, 0.5 * (bins[k] + bins[k + 1]))
+        if best is None or best[0] < MIN_SUPPORT:
+            break
+        _, axis, centre = best
+        s = points @ axis
+        ls = np.sign(s) * np.log(np.maximum(np.abs(s), 1e-12))
+        near = free & (np.abs(normals @ axis) > cos_lim) & (np.abs(ls - centre) < tol)
+        offset = _weighted_median(s[near], weight[near])
+        on = free & (np.abs(normals @ axis) > cos_lim) & (np.abs(s / offset - 1.0) < tol)
+        support = float(weight[on].sum())
+        free &= ~on
+        if support < MIN_SUPPORT:
+            continue
+        planes.append((axis, float(offset), support))
+    return planes
+
+
+def plane_depth_ratio(
+    dirs: np.ndarray, depth: np.ndarray, normals: np.ndarray, planes: list, tol: float, which: np.ndarray | None = None
+):
+    """Per pixel, the ratio (plane depth along the ray) / depth [H, W] for the plane it lies on (its normal
+    within ``NORMAL_DEG`` of the plane's axis and its depth within ``tol``: the nearest such plane), and
+    which plane [H, W] (-1: none)."""
+    H, W = depth.shape
+    best = np.full((H, W), np.inf)
+    ratio = np.ones((H, W))
+    given, which = which, np.full((H, W), -1)
+    cos_lim = np.cos(np.radians(NORMAL_DEG))
+    finite = np.isfinite(depth) & (depth > 0)
+    for i, (axis, offset, _) in enumerate(planes):
+        along = dirs @ axis  # [H, W]
+        t = np.where(np.abs(along) > 1e-6, offset / np.where(np.abs(along) > 1e-6, along, 1.0), -1.0)
+        r = np.where(finite & (t > 0), t / np.where(finite, depth, 1.0), np.inf)
+        err = np.abs(np.log(np.where(np.isfinite(r) & (r > 0), r, np.inf)))
+        if given is not None:
+            hit = (given == i) & np.isfinite(err)
+        else:
+            hit = (err < np.log1p(tol)) & (np.abs(normals @ axis) > cos_lim) & (err < best)
+        best = np.where(hit, err, best)
+        ratio = np.where(hit, r, ratio)
+        which = np.where(hit, i, which)
+    return ratio, which
+
+
+def spread_log_ratio(log_ratio: np.ndarray, known: np.ndarray, sigma: float, fade: float = 0.2) -> np.ndarray:
+    """log_ratio [H, W] known on ``known`` [H, W] spread over the panorama by normalized Gaussian
+    convolution (``sigma`` pixels; columns wrap, rows clamp); it fades to 0 (no correction) where the
+    known pixels' local density is below ``fade``."""
+    import scipy.ndimage as ndi
+
+    mode = ("nearest", "wrap")
+    w = known.astype(np.float64)
+    num = ndi.gaussian_filter(np.where(known, log_ratio, 0.0), sigma, mode=mode)
+    den = ndi.gaussian_filter(w, sigma, mode=mode)
+    return num / np.maximum(den, 1e-12) * np.clip(den / fade, 0.0, 1.0)
+
+
+def contact_offsets(
+    dirs: np.ndarray, depth: np.ndarray, which: np.ndarray, planes: list, ground: int, tol: float, gap: int = 6
+) -> tuple[list, list]:
+    """Plane offsets re-derived from where the planes meet, starting from plane ``ground`` (the floor):
+    the floor's offset is trusted; a plane whose pixels come within ``gap`` pixels (along a row or a
+    column, only unassigned pixels between, the depth continuous across: a real corner, not an
+    occluding edge) of an already settled plane's pixels meets it there, so the contact ray's point on
+    the settled plane lies on it too. Its offset is the weighted median of those points along its axis.
+    This is how a room layout is read: positions from where the edges are in the image, which a
+    network's low-frequency depth bias does not move. Returns the offsets [P] and how many contacts
+    settled each plane ([P], 0: kept as fitted)."""
+    offsets = [p[1] for p in planes]
+    settled = {ground}
+    count = [0] * len(planes)
+    free = which < 0
+    logd = np.log(np.where(np.isfinite(depth) & (depth > 0), depth, np.nan))
+    pairs = []  # (plane a, plane b, midpoint rays [M, 3])
+    for axis in (0, 1):
+        w, f, ld, dr = (which, free, logd, dirs) if axis == 0 else (which.T, free.T, logd.T, dirs.transpose(1, 0, 2))
+        n = w.shape[0]
+        between = np.ones((n - 1,) + w.shape[1:], bool)  # rows r + 1 .. r + k - 1 all unassigned
+        for k in range(1, gap + 1):
+            if k > 1:
+                between = between[: n - k] & f[k - 1 : n - 1]
+            a, b = w[: n - k], w[k:]
+            cont = np.abs(ld[: n - k] - ld[k:]) < np.log1p(tol)
+            hit = (a >= 0) & (b >= 0) & (a != b) & between & cont
+            if hit.any():
+                d = np.exp(ld)
+                pairs.append((a[hit], b[hit], dr[: n - k][hit], dr[k:][hit], d[: n - k][hit], d[k:][hit]))
+    if not pairs:
+        return offsets, count
+    pa, pb, ra, rb, da, db = (np.concatenate([p[c] for p in pairs]) for c in range(6))
+    changed = True
+    while changed:
+        changed = False
+        for i, (axis, _, _) in enumerate(planes):
+            if i in settled:
+                continue
+            est = []
+            for j in settled:
+                for mine, theirs, r_i, r_j, d_i, d_j in ((pa, pb, ra, rb, da, db), (pb, pa, rb, ra, db, da)):
+                    m = (mine == i) & (theirs == j)
+                    along = r_j[m] @ planes[j][0]
+                    ok = np.abs(along) > 1e-3
+                    if ok.sum() == 0:
+                        continue
+                    bias = offsets[j] / along[ok] / d_j[m][ok]  # true / depth on the settled side
+                    est.append((r_i[m][ok] @ axis) * d_i[m][ok] * bias)
+            if est:
+                est = np.concatenate(est)
+                est = est[np.sign(est) == np.sign(planes[i][1])]
+                if est.size >= MIN_CONTACTS and abs(np.log(np.median(est) / planes[i][1])) < np.log1p(tol):
+                    offsets[i] = float(np.median(est))
+                    count[i] = int(est.size)
+                    settled.add(i)
+                    changed = True
+    return offsets, count
+
+
+def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.03, sigma_frac: float = 1 / 128) -> tuple:
+    """Radial depth [H, W] (metres, +inf sky) straightened by the room's planes, and facts (dict: the
+    planes, the share of the panorama on them, the correction's range).
+
+    1. normals of the depth; the room's axes (``room_axes``); its planes (``find_planes``, tolerance
+       ``tol``); the floor (the heaviest horizontal plane below the eye) keeps its fitted offset, every
+       other plane takes the offset its contacts imply (``contact_offsets``);
+    2. on the plane pixels the ratio plane / depth samples the network's low-frequency bias: its log,
+       spread over the panorama with a Gaussian of ``sigma_frac`` x width pixels, multiplies every pixel;
+    3. pixels within ``snap`` of a plane are laid on it.
+    When the planes cover under ``MIN_ROOM`` of the sphere (an open landscape, curved surfaces) the
+    depth is returned unchanged."""
+    import torch
+
+    from holoflow.geometry.sphere import equirect_directions
+    from holoflow.geometry.surfaces import surface_normals
+
+    depth = np.asarray(depth, np.float64)
+    H, W = depth.shape
+    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
+    finite = np.isfinite(depth) & (depth > 0)
+    lat = (0.5 - (np.arange(H) + 0.5) / H) * np.pi
+    weight = np.broadcast_to(np.cos(lat)[:, None], (H, W)) * finite
+    weight = weight / (np.cos(lat).sum() * W)  # a share of the sphere
+    normals = surface_normals(torch.from_numpy(depth)).numpy()  # [H, W, 3]
+    pts = dirs * np.where(finite, depth, 0.0)[..., None]
+    keep = finite.reshape(-1)
+    axes = room_axes(normals, weight)
+    planes = find_planes(pts.reshape(-1, 3)[keep], normals.reshape(-1, 3)[keep], weight.reshape(-1)[keep], axes, tol)
+    if sum(p[2] for p in planes) < MIN_ROOM:  # not a room: an open scene, or curved surfaces
+        return depth, {"planes": [], "on_planes": 0.0, "note": f"planes cover under {MIN_ROOM:.0%}: not a room"}
+    ratio, which = plane_depth_ratio(dirs, depth, normals, planes, tol)
+    floors = [i for i, p in enumerate(planes) if p[0][1] > 0.9 and p[1] > 0]
+    fitted = [p[1] for p in planes]
+    if floors:
+        offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol)
+        planes = [(p[0], o, p[2]) for p, o in zip(planes, offsets)]
+        ratio, _ = plane_depth_ratio(dirs, depth, normals, planes, np.inf, which)
+    log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * W)
+    out = np.where(finite, depth * np.exp(log_c), depth)
+    ratio, on = plane_depth_ratio(dirs, out, normals, planes, snap)
+    out = np.where(on >= 0, out * ratio, out)
+    facts = {
+        "planes": [
+            {"axis": [round(float(v), 4) for v in p[0]], "offset": p[1], "fitted": f, "share": p[2]}
+            for p, f in zip(planes, fitted)
+        ],
+        "on_planes": float(weight[on >= 0].sum()),
+        "correction": [float(np.exp(log_c[finite].min())), float(np.exp(log_c[finite].max()))],
+    }
+    return out, facts
+
+
+def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
+    order = np.argsort(x)
+    c = np.cumsum(w[order])
+    return float(x[order][np.searchsorted(c, 0.5 * c[-1])])

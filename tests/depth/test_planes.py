@@ -1,0 +1,99 @@
+"""Planar refinement (holoflow/depth/planes.py): a box room turned off the panorama's axes, its depth
+bent by a smooth bias like a network's, is straightened back onto its walls; exact depth is left as it
+is; an open scene without walls is untouched; ``auto`` is on only for a network's depth."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from holoflow.depth.planes import refine_with_planes, room_axes, wanted
+from holoflow.geometry.sphere import equirect_directions
+from holoflow.geometry.surfaces import surface_normals
+
+YAW = math.radians(20.0)
+LO = np.array([-1.7, -1.2, -2.2])  # the room's walls along its own axes (m): x, y (ceiling, +y down), z
+HI = np.array([2.3, 1.6, 3.1])  # floor at y = 1.6
+
+
+def turned_room(H: int = 128, W: int = 256) -> np.ndarray:
+    """Radial depth [H, W] of a box room (walls LO / HI in its frame) turned by YAW about the vertical."""
+    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
+    c, s = math.cos(YAW), math.sin(YAW)
+    R = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])  # world -> room frame
+    d = dirs @ R.T  # [H, W, 3]
+    with np.errstate(divide="ignore"):
+        t = np.where(d > 0, HI / d, np.where(d < 0, LO / d, np.inf))
+    return t.min(-1)
+
+
+def bias_field(H: int, W: int) -> np.ndarray:
+    """A smooth multiplicative bias [H, W] (a few per cent, one to two cycles around), like a network's."""
+    lon = (np.arange(W) + 0.5) / W * 2 * np.pi - np.pi
+    lat = np.pi / 2 - (np.arange(H) + 0.5) / H * np.pi
+    lon, lat = np.meshgrid(lon, lat)
+    return np.exp(0.05 * np.sin(lon + 0.4) * np.cos(lat) + 0.03 * np.cos(2 * lon - 1.0) + 0.03 * np.sin(lat))
+
+
+def abs_rel(d: np.ndarray, truth: np.ndarray) -> float:
+    return float(np.mean(np.abs(d - truth) / truth))
+
+
+def test_room_axes_find_the_turn_modulo_90_degrees():
+    depth = torch.from_numpy(turned_room())
+    n = surface_normals(depth).numpy()
+    axes = room_axes(n, np.ones(depth.shape))
+    yaw = math.atan2(axes[1][0], axes[1][2])
+    assert math.isclose(math.remainder(yaw - YAW, math.pi / 2), 0.0, abs_tol=math.radians(1.0))
+    assert np.allclose(axes[0], [0.0, 1.0, 0.0])
+
+
+def test_a_bent_room_is_straightened_onto_its_walls():
+    truth = turned_room()
+    bent = truth * bias_field(*truth.shape) * np.exp(np.random.default_rng(0).normal(0, 0.01, truth.shape))
+    before = abs_rel(bent, truth)
+    out, facts = refine_with_planes(bent)
+    after = abs_rel(out, truth)
+    assert before > 0.03
+    assert after < 0.55 * before, (before, after)
+    # the floor's fit sets the scale (its own bias, 2 % here, is left); the other planes follow from where
+    # they meet it, not from their own bent depth
+    offsets = np.array(sorted(p["offset"] for p in facts["planes"]))
+    want = np.sort(np.concatenate([LO, HI]))
+    assert len(offsets) == 6 and np.allclose(offsets, want, rtol=0.025), offsets
+    fitted = np.array(sorted(p["fitted"] for p in facts["planes"]))
+    assert np.abs(offsets / want - 1).std() < 0.5 * np.abs(fitted / want - 1).std()
+    assert facts["on_planes"] > 0.8
+
+
+def test_exact_depth_stays_as_it_is():
+    truth = turned_room()
+    out, facts = refine_with_planes(truth)
+    assert len(facts["planes"]) == 6
+    assert abs_rel(out, truth) < 1e-3
+
+
+def test_an_open_scene_without_planes_is_untouched():
+    H, W = 64, 128
+    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()
+    sphere = 5.0 + 0.5 * np.sin(3 * np.arctan2(dirs[..., 0], dirs[..., 2]))  # hills, flat only in patches
+    sphere = np.where(dirs[..., 1] < -0.2, np.inf, sphere)  # and sky above
+    out, facts = refine_with_planes(sphere)
+    assert facts["planes"] == []
+    assert np.array_equal(out, sphere)
+
+
+@pytest.mark.parametrize(
+    "mode,engine,on",
+    [
+        ("auto", "depth_anything", True),
+        ("auto", "simulated", True),
+        ("auto", "layout", False),
+        ("auto", "given", False),
+        ("on", "layout", True),
+        ("off", "depth_anything", False),
+    ],
+)
+def test_auto_straightens_only_a_networks_depth(mode, engine, on):
+    assert wanted(mode, engine) is on
