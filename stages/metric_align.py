@@ -1,11 +1,12 @@
 """metric_align: metric depth (engine) on a seeded random subset of ``faces`` tangent faces, turned
 into radial disparity references; one global scale + offset maps the blended disparity onto them
 (Huber IRLS on relative residuals); blended pixels at the sky's border that are mostly sky are made
-sky (docs/depth.md, step 6); a network's depth is then straightened by the room's planes
-(holoflow/depth/planes.py, param ``planes``). Writes depth.exr (Z = radial metres, +inf sky) and
-metric_align.json (scale, offset, residuals, faces used); with a truth depth it records AbsRel,
-RMSE and delta1 of the result (docs/depth.md). Engine ``given`` (``auto`` on a panorama imported with its
-own Z channel): the given Z, resized to the disparity's grid (nearest), is the depth as it is."""
+sky (docs/depth.md, step 6); a network's depth then gets sharp steps (holoflow/depth/edges.py) and is
+straightened by the room's planes (holoflow/depth/planes.py; param ``refine``). Writes depth.exr (Z =
+radial metres, +inf sky) and metric_align.json (scale, offset, residuals, faces used, the refinement's
+facts); with a truth depth it records AbsRel, RMSE and delta1 of the result (docs/depth.md). Engine
+``given`` (``auto`` on a panorama imported with its own Z channel): the given Z, resized to the
+disparity's grid (nearest), is the depth as it is."""
 
 from __future__ import annotations
 

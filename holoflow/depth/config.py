@@ -101,10 +101,11 @@ class MetricAlignParams(StageParams):
     max_depth: float = param(3000.0, "a metric disparity below 1 / max_depth is sky (+inf)", "m", gt=0)
     huber: float = param(0.05, "Huber threshold on the relative residual of the global fit", gt=0)
     model: str = param("", "zoedepth: local dir or model id in the user's cache")
-    planes: str = param(
+    refine: str = param(
         "auto",
-        "straighten the depth by the room's planes (holoflow/depth/planes.py); auto: when a network (or its "
-        "simulation) made the relative depth",
+        "a network's depth: blurred steps made sharp (holoflow/depth/edges.py), then straightened by the "
+        "room's planes (holoflow/depth/planes.py); auto: when a network (or its simulation) made the "
+        "relative depth",
         choices=("auto", "on", "off"),
     )
     camera_height: float = _camera_height()

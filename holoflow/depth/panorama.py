@@ -15,6 +15,7 @@ import numpy as np
 from holoflow.depth import planes
 from holoflow.depth.accuracy import depth_metrics
 from holoflow.depth.config import MetricAlignParams, TangentDepthParams
+from holoflow.depth.edges import sharpen_edges
 from holoflow.depth.engines import resolve_engine
 from holoflow.depth.face_alignment import Alignment, align_faces
 from holoflow.depth.faces import face_rays, find_overlaps
@@ -172,9 +173,10 @@ def metric_from_disparity(
 ) -> MetricDepth:
     """Metric radial depth from a relative disparity [H, W] and metric depth (``engine``, a name in
     ``MetricAlignParams.ENGINES``; ``auto`` resolves by ``resolve_engine``) on a seeded subset of
-    cfg.faces faces, with metric_align's ``cfg``; then straightened by the room's planes when
-    ``cfg.planes`` asks for it for the ``relative_engine`` that made the disparity
-    (holoflow.depth.planes)."""
+    cfg.faces faces, with metric_align's ``cfg``; then, when ``cfg.refine`` asks for it for the
+    ``relative_engine`` that made the disparity and the panorama is at least ``planes.MIN_WIDTH`` pixels
+    across, its blurred steps made sharp (holoflow.depth.edges) and the whole straightened by the room's
+    planes (holoflow.depth.planes)."""
     engine, why = resolve_engine(engine, truth is not None)
     size = cfg.face_size
     faces = icosahedron_faces(size, cfg.padding)
@@ -202,7 +204,8 @@ def metric_from_disparity(
     if limit is not None:  # what the metric engine calls sky starts there in the aligned disparity
         depth = np.where(fit["scale"] * disparity + fit["offset"] < limit, np.inf, depth)
     depth = sky_mixed_edges(depth)
-    if planes.wanted(cfg.planes, relative_engine):
+    if planes.wanted(cfg.refine, relative_engine) and depth.shape[1] >= planes.MIN_WIDTH:
+        depth, fit["sharpened"] = sharpen_edges(depth, reach=max(1, round(2 * depth.shape[1] / 1024)))
         depth, fit["planes"] = planes.refine_with_planes(depth)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
 

@@ -24,14 +24,20 @@ MIN_SUPPORT = 0.01
 MIN_OFFSET = 0.2
 MAX_PLANES = 12
 MIN_CONTACTS = 20
+#: narrower panoramas are not refined: a step's blur, a ramp and a plane's curvature are a pixel or two
+#: apart there, and no window tells them apart
+MIN_WIDTH = 256
+#: relative offset between a plane's leaning and facing pixels beyond which it is a curved surface
+CURVED = 0.02
 #: the planes must cover this share of the sphere for the scene to be a room (else nothing is changed)
 MIN_ROOM = 0.3
-#: relative engines whose depth carries a network's low-frequency bias (``planes: auto`` straightens it)
+#: relative engines whose depth carries a network's blur and low-frequency bias (``refine: auto`` mends it)
 BIASED_ENGINES = ("depth_anything", "simulated")
 
 
 def wanted(mode: str, relative_engine: str) -> bool:
-    """Whether metric_align straightens the depth: ``mode`` on / off, or auto (a network's depth)."""
+    """Whether metric_align refines the depth (sharp steps, then planes): ``mode`` on / off, or auto (a
+    network's depth)."""
     return mode == "on" or (mode == "auto" and relative_engine in BIASED_ENGINES)
 
 
@@ -86,10 +92,24 @@ def find_planes(points: np.ndarray, normals: np.ndarray, weight: np.ndarray, axe
         on = free & (np.abs(normals @ axis) > cos_lim) & (np.abs(s / offset - 1.0) < tol)
         support = float(weight[on].sum())
         free &= ~on
-        if support < MIN_SUPPORT:
+        if support < MIN_SUPPORT or curved(s[on], np.abs(normals[on] @ axis), weight[on]):
             continue
         planes.append((axis, float(offset), support))
     return planes
+
+
+def curved(offsets: np.ndarray, cos_to_axis: np.ndarray, weight: np.ndarray) -> bool:
+    """Whether a plane's pixels (offsets [M] m, |cos| of their normal to the axis [M], weights [M]) are a
+    patch of a curved surface: on a cylinder or a sphere the pixels whose normal leans off the axis lie
+    nearer than those facing it (s = R cos), so the two groups' median offsets differ by more than
+    ``CURVED``; on a plane, however noisy or bent its normals, they do not. Undecided (False) when
+    either group holds under a tenth of the weight (exact planes have no leaning normals)."""
+    lean = cos_to_axis < np.cos(np.radians(NORMAL_DEG / 2))
+    total = weight.sum()
+    if weight[lean].sum() < 0.1 * total or weight[~lean].sum() < 0.1 * total:
+        return False
+    facing, leaning = _weighted_median(offsets[~lean], weight[~lean]), _weighted_median(offsets[lean], weight[lean])
+    return abs(np.log(leaning / facing)) > CURVED
 
 
 def plane_depth_ratio(
@@ -112,7 +132,9 @@ def plane_depth_ratio(
         if given is not None:
             hit = (given == i) & np.isfinite(err)
         else:
-            hit = (err < np.log1p(tol)) & (np.abs(normals @ axis) > cos_lim) & (err < best)
+            hit = (err < np.log1p(tol)) & (err < best)
+            if normals is not None:
+                hit &= np.abs(normals @ axis) > cos_lim
         best = np.where(hit, err, best)
         ratio = np.where(hit, r, ratio)
         which = np.where(hit, i, which)
@@ -192,7 +214,7 @@ def contact_offsets(
     return offsets, count
 
 
-def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.03, sigma_frac: float = 1 / 128) -> tuple:
+def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, sigma_frac: float = 1 / 128) -> tuple:
     """Radial depth [H, W] (metres, +inf sky) straightened by the room's planes, and facts (dict: the
     planes, the share of the panorama on them, the correction's range).
 
@@ -201,7 +223,9 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.03, 
        other plane takes the offset its contacts imply (``contact_offsets``);
     2. on the plane pixels the ratio plane / depth samples the network's low-frequency bias: its log,
        spread over the panorama with a Gaussian of ``sigma_frac`` x width pixels, multiplies every pixel;
-    3. pixels within ``snap`` of a plane are laid on it.
+    3. pixels within ``snap`` of a plane are laid on it, whatever their normal says: a network's normals
+       are off by ~20 deg (median) pixel to pixel, and a plane left a patchwork of laid and unlaid pixels
+       has a step at every seam, a crack one step away.
     When the planes cover under ``MIN_ROOM`` of the sphere (an open landscape, curved surfaces) the
     depth is returned unchanged."""
     import torch
@@ -232,7 +256,7 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.03, 
         ratio, _ = plane_depth_ratio(dirs, depth, normals, planes, np.inf, which)
     log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * W)
     out = np.where(finite, depth * np.exp(log_c), depth)
-    ratio, on = plane_depth_ratio(dirs, out, normals, planes, snap)
+    ratio, on = plane_depth_ratio(dirs, out, None, planes, snap)
     out = np.where(on >= 0, out * ratio, out)
     facts = {
         "planes": [

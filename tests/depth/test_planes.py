@@ -97,3 +97,15 @@ def test_an_open_scene_without_planes_is_untouched():
 )
 def test_auto_straightens_only_a_networks_depth(mode, engine, on):
     assert wanted(mode, engine) is on
+
+
+def test_a_round_wall_is_not_flattened():
+    H, W = 128, 256
+    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()
+    radius = 3.5  # a round room: floor and ceiling are planes, the wall a cylinder about the eye
+    horizontal = np.linalg.norm(dirs[..., [0, 2]], axis=-1)
+    with np.errstate(divide="ignore"):
+        t = np.minimum(radius / horizontal, np.where(dirs[..., 1] > 0, 1.5 / dirs[..., 1], -1.2 / dirs[..., 1]))
+    out, facts = refine_with_planes(t)
+    assert sorted(round(p["offset"], 3) for p in facts["planes"]) == [-1.2, 1.5]
+    assert abs_rel(out, t) < 1e-3
