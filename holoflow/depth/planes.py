@@ -161,12 +161,14 @@ def contact_offsets(
     the floor's offset is trusted; a plane whose pixels come within ``gap`` pixels (along a row or a
     column, only unassigned pixels between, the depth continuous across: a real corner, not an
     occluding edge) of an already settled plane's pixels meets it there, so the contact ray's point on
-    the settled plane lies on it too. Its offset is the weighted median of those points along its axis.
+    the settled plane lies on it too: each pair of planes that meet gives one equation (the median over
+    its contacts) for the ratio of their offsets, and all offsets are solved at once by weighted least
+    squares with the floor held (a plane the solution moves by more than ``tol`` from its fit is
+    dropped and the rest solved again).
     This is how a room layout is read: positions from where the edges are in the image, which a
     network's low-frequency depth bias does not move. Returns the offsets [P] and how many contacts
     settled each plane ([P], 0: kept as fitted)."""
     offsets = [p[1] for p in planes]
-    settled = {ground}
     count = [0] * len(planes)
     free = which < 0
     logd = np.log(np.where(np.isfinite(depth) & (depth > 0), depth, np.nan))
@@ -187,31 +189,71 @@ def contact_offsets(
     if not pairs:
         return offsets, count
     pa, pb, ra, rb, da, db = (np.concatenate([p[c] for p in pairs]) for c in range(6))
-    changed = True
-    while changed:
-        changed = False
-        for i, (axis, _, _) in enumerate(planes):
-            if i in settled:
-                continue
-            est = []
-            for j in settled:
-                for mine, theirs, r_i, r_j, d_i, d_j in ((pa, pb, ra, rb, da, db), (pb, pa, rb, ra, db, da)):
-                    m = (mine == i) & (theirs == j)
-                    along = r_j[m] @ planes[j][0]
-                    ok = np.abs(along) > 1e-3
-                    if ok.sum() == 0:
-                        continue
-                    bias = offsets[j] / along[ok] / d_j[m][ok]  # true / depth on the settled side
-                    est.append((r_i[m][ok] @ axis) * d_i[m][ok] * bias)
-            if est:
-                est = np.concatenate(est)
-                est = est[np.sign(est) == np.sign(planes[i][1])]
-                if est.size >= MIN_CONTACTS and abs(np.log(np.median(est) / planes[i][1])) < np.log1p(tol):
-                    offsets[i] = float(np.median(est))
-                    count[i] = int(est.size)
-                    settled.add(i)
-                    changed = True
+    # each contact says log|s_a| - log|s_b| = log q: the depth ratio true / measured carries across the
+    # corner (the bias is smooth), so s_a / s_b = (r_a . axis_a) d_a / ((r_b . axis_b) d_b)
+    axes = np.stack([p[0] for p in planes])  # [P, 3]
+    qa = np.einsum("mk,mk->m", ra, axes[pa]) * da
+    qb = np.einsum("mk,mk->m", rb, axes[pb]) * db
+    signs = np.sign([p[1] for p in planes])
+    ok = (np.sign(qa) == signs[pa]) & (np.sign(qb) == signs[pb])
+    logq = np.log(np.abs(qa[ok]) / np.abs(qb[ok]))
+    lo, hi = np.minimum(pa[ok], pb[ok]), np.maximum(pa[ok], pb[ok])
+    logq = np.where(pa[ok] == lo, logq, -logq)  # as log|s_lo| - log|s_hi|
+    edges = []  # (i, j, median log|s_i| - log|s_j|, contacts)
+    for i, j in {(int(a), int(b)) for a, b in zip(lo, hi)}:
+        m = (lo == i) & (hi == j)
+        if m.sum() >= MIN_CONTACTS:
+            edges.append((i, j, float(np.median(logq[m])), int(m.sum())))
+    fitted = np.log(np.abs([p[1] for p in planes]))
+    free_planes = set(range(len(planes))) - {ground}
+    for _ in range(len(planes)):  # solve; drop planes the contacts move by more than tol; solve again
+        x, reached = _solve_offsets(edges, len(planes), ground, fitted[ground], free_planes)
+        bad = {i for i in reached if i != ground and abs(x[i] - fitted[i]) > np.log1p(tol)}
+        if not bad:
+            break
+        free_planes -= bad
+        edges = [e for e in edges if e[0] not in bad and e[1] not in bad]
+    for i in reached - {ground}:
+        offsets[i] = float(signs[i] * np.exp(x[i]))
+        count[i] = sum(e[3] for e in edges if i in e[:2])
     return offsets, count
+
+
+def _solve_offsets(edges: list, n: int, ground: int, x_ground: float, free: set) -> tuple[np.ndarray, set]:
+    """Log offsets [n] from the contact equations ``edges`` (i, j, log|s_i| - log|s_j|, weight) by
+    weighted least squares, ``ground`` held at ``x_ground``; only the planes of ``free`` linked to the
+    ground through the equations are solved (the set returned, ground included)."""
+    reached, grow = {ground}, True
+    while grow:
+        grow = False
+        for i, j, _, _ in edges:
+            if (i in reached) != (j in reached) and ({i, j} - reached) <= free:
+                reached |= {i, j}
+                grow = True
+    x = np.zeros(n)
+    x[ground] = x_ground
+    unknown = sorted(reached - {ground})
+    if not unknown:
+        return x, reached
+    col = {k: c for c, k in enumerate(unknown)}
+    rows, rhs, w = [], [], []
+    for i, j, d, cnt in edges:
+        if i not in reached or j not in reached:
+            continue
+        row = np.zeros(len(unknown))
+        b = d
+        for k, sgn in ((i, 1.0), (j, -1.0)):
+            if k == ground:
+                b -= sgn * x_ground
+            else:
+                row[col[k]] += sgn
+        rows.append(row)
+        rhs.append(b)
+        w.append(np.sqrt(cnt))
+    A, b, w = np.array(rows), np.array(rhs), np.array(w)
+    sol, *_ = np.linalg.lstsq(A * w[:, None], b * w, rcond=None)
+    x[unknown] = sol
+    return x, reached
 
 
 def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, sigma_frac: float = 1 / 128) -> tuple:
