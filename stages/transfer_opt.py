@@ -1,8 +1,9 @@
 """transfer_opt: Transfer Optimization. Fresh Gaussians from P_f, trained on the PANO and INP sets
-together, then (``fit_iters`` > 0) their colours fitted to the detail panorama's views at the base
-cameras at the viewing size ``fit_size`` (holoflow/recon/colour_fit.py); writes the final scene
-(scene.ply, 3DGS layout), train_log.json and sRGB previews rendered
-from inside the scene (previews/look_around.png strip, previews/look_around.gif)."""
+together (with ``depth_weight`` > 0 the PANO set's views also on metric_align's depth), then
+(``fit_iters`` > 0) their colours fitted to the detail panorama's views at the base cameras at the
+viewing size ``fit_size`` (holoflow/recon/colour_fit.py); writes the final scene (scene.ply, 3DGS
+layout), train_log.json and sRGB previews rendered from inside the scene (previews/look_around.png
+strip, previews/look_around.gif)."""
 
 from __future__ import annotations
 
@@ -14,17 +15,19 @@ def main() -> int:
 
     job = Job.from_argv()
     job.torch_threads(1)  # small tensors here; the numba kernels use job.cpus threads
-    from holoflow.io.exr import read_rgb
+    from holoflow.io.exr import read_exr, read_rgb
     from holoflow.io.ply import read_points
     from holoflow.recon.colour_fit import fit_colours, polar_weights, viewing_views
     from holoflow.recon.config import TransferOptParams
     from holoflow.recon.optimize import cloud_footprint, save_result, transfer_optimize
     from holoflow.recon.preview import write_previews
-    from holoflow.recon.views import load_view_set
+    from holoflow.recon.views import add_depth_targets, load_view_set
 
     cfg = job.config(TransferOptParams)
     xyz, rgb = read_points(job.input_file("cloud", "pf.ply"))
     pano_views, cams = load_view_set(job.input("pano"), alpha_is_mask=False)
+    if cfg.depth_weight > 0:  # the PANO set's views learn the metric depth too
+        add_depth_targets(pano_views, read_exr(job.input_file("depth", "depth.exr"))[0]["Z"])
     inp_views, _ = load_view_set(job.input("inp"), alpha_is_mask=False) if cfg.use_inp else ([], None)
     model, log = transfer_optimize(
         xyz,

@@ -74,6 +74,12 @@ class OptimParams(StageParams):
         ge=0,
         le=1,
     )
+    depth_weight: float = param(
+        0.0,
+        "weight of the depth loss on the PANO set's views: the rendered depth's mean relative error "
+        "against metric_align's depth (holoflow/splat/train.py lambda_depth); 0 = colour only (paper)",
+        ge=0,
+    )
     opacity_reset_every: int = param(0, "0 = never (paper: no opacity reset)", "iters", ge=0)
     max_gaussians: int = param(200000, "densification stops growing past this count", ge=1)
     train_seed: int = param(

@@ -8,12 +8,14 @@ shows SH colours in (and the space of the point-cloud PLY colours Gaussians star
 A training view is a dict ``{"name", "image" [H, W, 3] sRGB float32, "mask" [H, W] float32 (1 =
 supervise) or None, "viewmat" [4, 4] world-to-camera, "K" [3, 3]}`` (the ``holoflow.splat.train``
 view contract, plus a name), and ``"seen"`` [H, W] float32 when the EXR has that channel (the PCD
-set: 1 where any point of P_s landed).
+set: 1 where any point of P_s landed); ``add_depth_targets`` gives the views at the centre a ``"depth"``
+[H, W] (camera z, metres; NaN = not supervised) from the panorama's metric depth.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +69,38 @@ def load_view_set(folder: str | Path, alpha_is_mask: bool) -> tuple[list[dict], 
         if "seen" in ch:
             views[-1]["seen"] = torch.from_numpy((ch["seen"] >= 0.5).astype(np.float32))  # [H, W]
     return views, cams
+
+
+def add_depth_targets(views: list[dict], radial_depth: np.ndarray, edge: float = 0.05) -> int:
+    """Give each view whose camera sits at the panorama's centre a ``depth`` target [H, W]: the camera z
+    (metres) of the radial depth [h, w] (equirect, +inf sky) seen through it, nearest pixel; NaN where
+    nothing is supervised: the sky, and pixels whose 3 x 3 neighbourhood spans a relative depth step over
+    ``edge`` (an occlusion edge, where a rendered pixel's expected depth mixes two surfaces). Views away
+    from the centre (PCD and INP sets) get none. Returns how many views got one."""
+    import torch.nn.functional as F
+
+    from holoflow.geometry.camera import camera_centers, pinhole_rays
+    from holoflow.geometry.sampling import equirect_to_pinhole
+
+    r = torch.from_numpy(np.asarray(radial_depth, np.float64))
+    disp = torch.where(torch.isfinite(r) & (r > 0), 1.0 / r.clamp_min(1e-12), torch.zeros_like(r))[None]  # [1, h, w]
+    done = 0
+    for v in views:
+        V = v["viewmat"].double()
+        if float(torch.linalg.vector_norm(camera_centers(V[None])[0])) > 1e-6:
+            continue
+        H, W = v["image"].shape[:2]
+        K = v["K"].double()
+        d = equirect_to_pinhole(disp, K, V, H, W, mode="nearest")[0, 0]  # [H, W] radial disparity
+        _, rays = pinhole_rays(K[None], V[None], H, W)  # [1, H, W, 3]
+        cos = torch.einsum("hwi,i->hw", rays[0], V[2, :3])  # the ray's cosine to the optical axis
+        z = torch.where(d > 0, cos / d.clamp_min(1e-12), torch.full_like(d, float("inf")))
+        logz = torch.where(torch.isfinite(z), z.log(), torch.full_like(z, 1e3))[None, None]
+        spread = F.max_pool2d(logz, 3, 1, 1) + F.max_pool2d(-logz, 3, 1, 1)  # max - min around
+        ok = torch.isfinite(z) & (spread[0, 0] < math.log1p(edge))
+        v["depth"] = torch.where(ok, z, torch.full_like(z, float("nan"))).float()
+        done += 1
+    return done
 
 
 def stack_cameras(views: list[dict]) -> tuple[torch.Tensor, torch.Tensor]:

@@ -38,6 +38,12 @@ class TrainConfig:
     lr_rotation: float = 1e-3
     lambda_dssim: float = 0.2
     """Loss = (1 - lambda) L1 + lambda (1 - SSIM), SSIM with an 11 px Gaussian window (metrics.ssim_map)."""
+    lambda_depth: float = 0.0
+    """Plus lambda x the mean relative error |z - target| / target of the rendered depth (alpha-normalised
+    camera z) on the pixels of a view's ``depth`` target that are finite and rendered (alpha > 0.5); 0 =
+    colour only (3DGS). Keeps the Gaussians on the surfaces the depth put them on while the colour loss
+    fits the views: moving them off the surface changes nothing the base cameras see, and everything a
+    step away does."""
     densify_every: int = 100
     densify_from: int = 500
     """Densify at steps it > densify_from with it % densify_every == 0 ..."""
@@ -152,6 +158,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
         image = v["image"]
         H, W = image.shape[:2]
         sh_degree = min(model.sh_degree, (cfg.step_offset + it - 1) // max(cfg.sh_degree_every, 1))
+        target = v.get("depth") if cfg.lambda_depth > 0 else None
         out = render(
             model,
             viewmats[order_i][None],
@@ -161,13 +168,15 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
             backend=cfg.backend,
             background=bg,
             sh_degree=sh_degree,
-            depth=False,
+            depth=target is not None,
         )
         means2d = out["meta"]["means2d"]
         if means2d.requires_grad:
             means2d.retain_grad()
         mask = v.get("mask")
         loss = masked_loss(out["rgb"][0], image, mask, cfg.lambda_dssim)
+        if target is not None:
+            loss = loss + cfg.lambda_depth * depth_loss(out["depth"][0, ..., 0], out["alpha"][0, ..., 0], target)
         loss.backward()
         losses.append(loss.detach())
         strategy.step_pre_optimizer(it, means2d, out["meta"]["radii"], W, H, out["meta"].get("gaussian_ids"))
@@ -189,9 +198,22 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
 
 
 def _views_on(views: list[dict], dev: torch.device) -> list[dict]:
-    """image [H, W, 3], mask [H, W] (or None) and K [3, 3] of every view as float32 on ``dev``."""
+    """image [H, W, 3], mask [H, W] (or None), depth [H, W] (or None) and K [3, 3] of every view as
+    float32 on ``dev``."""
     f32 = lambda t: None if t is None else torch.as_tensor(t, dtype=torch.float32).to(dev)  # noqa: E731
-    return [dict(image=f32(v["image"]), mask=f32(v.get("mask")), K=f32(v["K"])) for v in views]
+    keys = ("image", "mask", "depth", "K")
+    return [{k: f32(v.get(k)) for k in keys} for v in views]
+
+
+def depth_loss(depth: torch.Tensor, alpha: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean relative error of the rendered depth: depth [H, W] accumulated camera z (sum of w_i z_i),
+    alpha [H, W], target [H, W] camera z (m; NaN / inf = not supervised); over the target's finite
+    pixels with alpha > 0.5 (0 when there is none)."""
+    ok = torch.isfinite(target) & (target > 0) & (alpha > 0.5)
+    if not bool(ok.any()):
+        return depth.sum() * 0.0
+    z = depth[ok] / alpha[ok]
+    return ((z - target[ok]).abs() / target[ok]).mean()
 
 
 def _make_optimizer(model: GaussianModel, cfg: TrainConfig, extent: float) -> torch.optim.Adam:
