@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def sharpen_edges(depth: np.ndarray, reach: int = 2, jump: float = 0.25) -> tuple[np.ndarray, float]:
+def sharpen_edges(depth: np.ndarray, reach: int | None = None, jump: float = 0.25) -> tuple[np.ndarray, float]:
     """Radial depth [H, W] with its blurred steps made sharp, and the share of pixels moved.
 
     Within ``2 reach`` pixels of a pixel (a window wide enough to see past the blur's tails on both
@@ -23,10 +23,12 @@ def sharpen_edges(depth: np.ndarray, reach: int = 2, jump: float = 0.25) -> tupl
     differ by more than ``jump`` of the largest; a pixel there takes the side its disparity is nearer to
     (sky when that is the far side). Pixels of a smooth
     surface (no such step around) and the step's two plateaus are returned unchanged. ``reach`` should
-    cover the blur's half width: 2 px is a network's at 1024 px across."""
+    cover the blur's half width; None: a network's, 2 px at 1024 px across, in proportion to the width
+    (at least 1)."""
     import scipy.ndimage as ndi
 
     depth = np.asarray(depth, dtype=np.float64)
+    reach = max(1, round(2 * depth.shape[1] / 1024)) if reach is None else reach
     disp = np.where(np.isfinite(depth) & (depth > 0), 1.0 / np.where(depth > 0, depth, 1.0), 0.0)  # [H, W]
     size, mode = 4 * reach + 1, ("nearest", "wrap")  # the sides: past the blur's tails on either side
     hi = ndi.maximum_filter(disp, size=size, mode=mode)

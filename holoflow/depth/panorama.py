@@ -205,7 +205,7 @@ def metric_from_disparity(
         depth = np.where(fit["scale"] * disparity + fit["offset"] < limit, np.inf, depth)
     depth = sky_mixed_edges(depth)
     if planes.wanted(cfg.refine, relative_engine) and depth.shape[1] >= planes.MIN_WIDTH:
-        depth, fit["sharpened"] = sharpen_edges(depth, reach=max(1, round(2 * depth.shape[1] / 1024)))
+        depth, fit["sharpened"] = sharpen_edges(depth)
         depth, fit["planes"] = planes.refine_with_planes(depth)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
 

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-#: the planes' search: a plane gets pixels whose normal is within ``normal_deg`` of its axis and
-#: whose depth is within ``tol`` (relative) of it; a plane needs ``min_support`` of the panorama's
-#: solid angle; offsets closer than ``min_offset`` metres to the eye are not planes of the room
+#: the planes' search: a plane gets pixels whose normal is within ``NORMAL_DEG`` of its axis and
+#: whose depth is within ``tol`` (relative) of it; a plane needs ``MIN_SUPPORT`` of the panorama's
+#: solid angle; offsets closer than ``MIN_OFFSET`` metres to the eye are not planes of the room; at
+#: most ``MAX_PLANES``; two planes meet when they touch at ``MIN_CONTACTS`` pixel pairs or more
 NORMAL_DEG = 25.0
 MIN_SUPPORT = 0.01
 MIN_OFFSET = 0.2
@@ -157,24 +158,25 @@ def spread_log_ratio(log_ratio: np.ndarray, known: np.ndarray, sigma: float, fad
 def contact_offsets(
     dirs: np.ndarray, depth: np.ndarray, which: np.ndarray, planes: list, ground: int, tol: float, gap: int = 6
 ) -> tuple[list, list]:
-    """Plane offsets re-derived from where the planes meet, starting from plane ``ground`` (the floor):
-    the floor's offset is trusted; a plane whose pixels come within ``gap`` pixels (along a row or a
-    column, only unassigned pixels between, the depth continuous across: a real corner, not an
-    occluding edge) of an already settled plane's pixels meets it there, so the contact ray's point on
-    the settled plane lies on it too: each pair of planes that meet gives one equation (the median over
-    its contacts) for the ratio of their offsets, and all offsets are solved at once by weighted least
-    squares with the floor held (a plane the solution moves by more than ``tol`` from its fit is
-    dropped and the rest solved again).
-    This is how a room layout is read: positions from where the edges are in the image, which a
-    network's low-frequency depth bias does not move. Returns the offsets [P] and how many contacts
-    settled each plane ([P], 0: kept as fitted)."""
+    """Plane offsets [P] re-derived from where the planes meet, the offset of plane ``ground`` (the
+    floor) held. Two planes touch where their pixels come within ``gap`` pixels of each other along a
+    row or a column, with only unassigned pixels between and the depth continuous across (a real
+    corner, not an occluding edge). A network's bias is smooth, so at a seam it is the same on both
+    sides, and the measured depths there have the ratio of the true offsets: each pair of planes that
+    touch at ``MIN_CONTACTS`` pixel pairs or more gives one equation (the median over its contacts) for
+    the log of that ratio, and all offsets are solved at once by weighted least squares
+    (``_solve_offsets``); a plane the solution moves by more than ``tol`` from its fit is dropped and the
+    rest solved again. This is how a room layout is read: positions from where the edges are in the
+    image, which a low-frequency bias does not move. Returns the offsets [P] and each plane's number of
+    contacts in the solution ([P], 0: kept as fitted)."""
     offsets = [p[1] for p in planes]
     count = [0] * len(planes)
     free = which < 0
-    logd = np.log(np.where(np.isfinite(depth) & (depth > 0), depth, np.nan))
-    pairs = []  # (plane a, plane b, midpoint rays [M, 3])
+    d = np.where(np.isfinite(depth) & (depth > 0), depth, np.nan)
+    pairs = []  # (plane a, plane b, rays at a [M, 3], at b [M, 3], depth at a [M], at b [M])
     for axis in (0, 1):
-        w, f, ld, dr = (which, free, logd, dirs) if axis == 0 else (which.T, free.T, logd.T, dirs.transpose(1, 0, 2))
+        w, f, dd, dr = (which, free, d, dirs) if axis == 0 else (which.T, free.T, d.T, dirs.transpose(1, 0, 2))
+        ld = np.log(dd)
         n = w.shape[0]
         between = np.ones((n - 1,) + w.shape[1:], bool)  # rows r + 1 .. r + k - 1 all unassigned
         for k in range(1, gap + 1):
@@ -184,8 +186,7 @@ def contact_offsets(
             cont = np.abs(ld[: n - k] - ld[k:]) < np.log1p(tol)
             hit = (a >= 0) & (b >= 0) & (a != b) & between & cont
             if hit.any():
-                d = np.exp(ld)
-                pairs.append((a[hit], b[hit], dr[: n - k][hit], dr[k:][hit], d[: n - k][hit], d[k:][hit]))
+                pairs.append((a[hit], b[hit], dr[: n - k][hit], dr[k:][hit], dd[: n - k][hit], dd[k:][hit]))
     if not pairs:
         return offsets, count
     pa, pb, ra, rb, da, db = (np.concatenate([p[c] for p in pairs]) for c in range(6))
@@ -291,7 +292,7 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
         return depth, {"planes": [], "on_planes": 0.0, "note": f"planes cover under {MIN_ROOM:.0%}: not a room"}
     ratio, which = plane_depth_ratio(dirs, depth, normals, planes, tol)
     floors = [i for i, p in enumerate(planes) if p[0][1] > 0.9 and p[1] > 0]
-    fitted = [p[1] for p in planes]
+    fitted, contacts = [p[1] for p in planes], [0] * len(planes)
     if floors:
         offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol)
         planes = [(p[0], o, p[2]) for p, o in zip(planes, offsets)]
@@ -302,8 +303,8 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
     out = np.where(on >= 0, out * ratio, out)
     facts = {
         "planes": [
-            {"axis": [round(float(v), 4) for v in p[0]], "offset": p[1], "fitted": f, "share": p[2]}
-            for p, f in zip(planes, fitted)
+            {"axis": [round(float(v), 4) for v in p[0]], "offset": p[1], "fitted": f, "contacts": c, "share": p[2]}
+            for p, f, c in zip(planes, fitted, contacts)
         ],
         "on_planes": float(weight[on >= 0].sum()),
         "correction": [float(np.exp(log_c[finite].min())), float(np.exp(log_c[finite].max()))],
@@ -312,6 +313,7 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
 
 
 def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:
+    """The value of x [M] below which half of the weight w [M] lies."""
     order = np.argsort(x)
     c = np.cumsum(w[order])
     return float(x[order][np.searchsorted(c, 0.5 * c[-1])])
