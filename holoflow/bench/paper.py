@@ -58,6 +58,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--truth", metavar="DIR", help="a truth set: the profile's reconstruction on its panorama, scored")
     ap.add_argument("--way", default="exact", choices=["exact", "simulated"], help="--truth: the depth the run gets")
     ap.add_argument("--pictures", default="docs/images", help="--truth: folder for the ring pictures")
+    ap.add_argument(
+        "--set", dest="sets", action="append", default=[], metavar="STAGE.PARAM=VALUE", help="--truth: as holoflow run"
+    )
     args = ap.parse_args(argv)
     root = Path(__file__).resolve().parents[2]
     if args.truth:
@@ -250,6 +253,7 @@ def truth_main(args, root: Path) -> int:
         cmd = [sys.executable, "-m", "holoflow", "run", "a room", "--profile", args.profile, "--device", args.device]
         cmd += ["--store", str(store), "--json"] + (["--models", args.models] if args.models else [])
         cmd += truth_run_args(truth, args.way, pano_width(truth / "pano_z.exr"), args.models)
+        cmd += [a for x in args.sets for a in ("--set", x)]
         print("holoflow bench paper: " + " ".join(cmd[2:]), file=sys.stderr)
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, cwd=root, stdout=subprocess.PIPE, text=True, timeout=args.timeout)
@@ -292,7 +296,8 @@ def truth_report(
         TRUTH_BEGIN,
         "",
         f"`holoflow bench paper --truth {truth.name} --way {args.way} --device {args.device} --profile "
-        f"{args.profile}`: the profile's reconstruction on the truth set's own panorama with "
+        f"{args.profile}{''.join(' --set ' + x for x in args.sets)}`: the profile's reconstruction on the "
+        "truth set's own panorama with "
         + ("its exact depth" if args.way == "exact" else "the simulated network's depth")
         + f" (bench.paper.truth_run_args), scored from its {scores['views']} cameras. GPU: **{gpu}**; "
         f"host: {machine()}."

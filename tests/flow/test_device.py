@@ -21,7 +21,7 @@ def test_profile_list_applies_in_order(real):
     both = pipeline.resolve(real, "paper,tiny")
     assert both["base_pano"].engine == "diffusion360"  # from paper, tiny names no engine
     assert both["base_pano"].params["width"] == 128  # tiny's size wins over paper's
-    assert both["pre_opt"].params["pcd_iters"] == 10 and both["pre_opt"].params["init_opacity"] == 0.1
+    assert both["pre_opt"].params["pcd_iters"] == 10 and both["pre_opt"].params["sh_degree"] == 3
     assert both["base_pano"].overrides["width"] == "profile tiny"
     assert both["base_pano"].resources.gpus == 1  # paper's key, tiny names none
     rev = pipeline.resolve(real, "tiny,paper")
