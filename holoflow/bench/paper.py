@@ -145,6 +145,21 @@ def stage_rows(store: Path, summary: dict) -> list[dict]:
     return rows
 
 
+def stage_table(rows: list[dict]) -> list[str]:
+    """Markdown lines: one row per stage of ``stage_rows``."""
+    fmt = lambda v, f="{:.1f}": "-" if v is None else f.format(v)  # noqa: E731
+    lines = [
+        "| stage | engine | device | wall s | peak GPU MiB | peak RSS MiB | Gaussians |",
+        "|---|---|---|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['stage']} | {r['engine']} | {r['device']} | {fmt(r['wall_s'])} | {fmt(r['gpu_peak_mb'], '{:.0f}')} "
+            f"| {fmt(r['rss_mb'], '{:.0f}')} | {fmt(r['gaussians'], '{:,}')} |"
+        )
+    return lines
+
+
 def report(rows: list[dict], wall: float, t_models: float | None, args, summary: dict) -> str:
     gpu = next((r["gpu"] for r in rows if r.get("gpu")), None) or gpu_name()
     recon = sum(
@@ -159,15 +174,8 @@ def report(rows: list[dict], wall: float, t_models: float | None, args, summary:
         "Times are each step's wall clock as its own process (Python start-up, imports and model loading "
         "included); peak GPU memory is what torch allocated in that step.",
         "",
-        "| stage | engine | device | wall s | peak GPU MiB | peak RSS MiB | Gaussians |",
-        "|---|---|---|---:|---:|---:|---:|",
+        *stage_table(rows),
     ]
-    for r in rows:
-        fmt = lambda v, f="{:.1f}": "-" if v is None else f.format(v)  # noqa: E731
-        lines.append(
-            f"| {r['stage']} | {r['engine']} | {r['device']} | {fmt(r['wall_s'])} | {fmt(r['gpu_peak_mb'], '{:.0f}')} "
-            f"| {fmt(r['rss_mb'], '{:.0f}')} | {fmt(r['gaussians'], '{:,}')} |"
-        )
     lines += [
         "",
         f"End to end: **{wall:.1f} s** ({wall / 60:.2f} min) for `holoflow run` with all 12 steps"
@@ -241,6 +249,7 @@ def pano_width(path: Path) -> int:
 
 def truth_main(args, root: Path) -> int:
     """``--truth DIR``: the profile's reconstruction on the truth set, timed per step and scored per ring."""
+    from holoflow.bench.profiles import replace_block
     from holoflow.evaluation.truth_scores import ring_strip, score_truth
     from holoflow.report.pictures import encode
 
@@ -251,7 +260,13 @@ def truth_main(args, root: Path) -> int:
     with tempfile.TemporaryDirectory(prefix="holoflow-bench-paper-") as tmp:
         store = Path(tmp) / "artifacts"
         cmd = [sys.executable, "-m", "holoflow", "run", "a room", "--profile", args.profile, "--device", args.device]
-        cmd += ["--store", str(store), "--json"] + (["--models", args.models] if args.models else [])
+        cmd += [
+            "--until",
+            "transfer_opt",
+            "--store",
+            str(store),
+            "--json",
+        ]  # the scene scored; no export + (["--models", args.models] if args.models else [])
         cmd += truth_run_args(truth, args.way, pano_width(truth / "pano_z.exr"), args.models)
         cmd += [a for x in args.sets for a in ("--set", x)]
         print("holoflow bench paper: " + " ".join(cmd[2:]), file=sys.stderr)
@@ -275,12 +290,7 @@ def truth_main(args, root: Path) -> int:
     block = truth_report(rows, scores, wall, build_s, args, truth, names)
     out = root / args.out
     text = out.read_text() if out.is_file() else ""
-    if TRUTH_BEGIN in text and TRUTH_END in text:
-        i, j = text.index(TRUTH_BEGIN), text.index(TRUTH_END) + len(TRUTH_END)
-        text = text[:i] + block.rstrip("\n") + text[j:]
-    else:
-        text = text.rstrip("\n") + "\n\n" + block
-    out.write_text(text)
+    out.write_text(replace_block(text, block, TRUTH_BEGIN, TRUTH_END))
     print(block)
     print(f"holoflow bench paper: wrote {out}", file=sys.stderr)
     return 0
@@ -291,7 +301,6 @@ def truth_report(
 ) -> str:
     """The ``--truth`` section: per step seconds, per ring scores, pictures (markdown between markers)."""
     gpu = next((r["gpu"] for r in rows if r.get("gpu")), None) or gpu_name()
-    fmt = lambda v, f="{:.1f}": "-" if v is None else f.format(v)  # noqa: E731
     lines = [
         TRUTH_BEGIN,
         "",
@@ -307,14 +316,8 @@ def truth_report(
             else ""
         ),
         "",
-        "| stage | engine | device | wall s | peak GPU MiB | peak RSS MiB | Gaussians |",
-        "|---|---|---|---:|---:|---:|---:|",
+        *stage_table(rows),
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['stage']} | {r['engine']} | {r['device']} | {fmt(r['wall_s'])} | {fmt(r['gpu_peak_mb'], '{:.0f}')} "
-            f"| {fmt(r['rss_mb'], '{:.0f}')} | {fmt(r['gaussians'], '{:,}')} |"
-        )
     steps = sum(r["wall_s"] or 0 for r in rows)
     lines += [
         "",

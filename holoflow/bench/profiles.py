@@ -329,10 +329,10 @@ def truth_table(rows: list[dict]) -> list[str]:
     return lines + [""]
 
 
-def replace_block(text: str, block: str) -> str:
-    """``text`` with the BEGIN ... END block replaced by ``block`` (appended when it has none)."""
-    if BEGIN in text and END in text:
-        i, j = text.index(BEGIN), text.index(END) + len(END)
+def replace_block(text: str, block: str, begin: str = BEGIN, end: str = END) -> str:
+    """``text`` with the ``begin`` ... ``end`` block replaced by ``block`` (appended when it has none)."""
+    if begin in text and end in text:
+        i, j = text.index(begin), text.index(end) + len(end)
         return text[:i] + block.rstrip("\n") + text[j:]
     return text.rstrip("\n") + "\n\n" + block
 
