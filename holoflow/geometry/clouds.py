@@ -5,8 +5,10 @@ projected from); P_f, the cloud the Gaussians start from, at ``pf_width`` (0 = a
 ``view_size`` view resolves, capped at the panorama's width and ``pf_max_width``), built in this order
 on its equirect grid:
 
-1. sky (inf depth) on a far shell of radius ``sky_radius`` (0 = 2 x the 99th percentile of finite
-   depth), so the scene stays enclosed (holoflow/geometry/pointcloud.py);
+1. (every cloud) window bars the depth lost to the sky put back in their window's plane
+   (``opening_bars``, holoflow/geometry/openings.py), then sky (inf depth) on a far shell of radius
+   ``sky_radius`` (0 = 2 x the 99th percentile of finite depth), so the scene stays enclosed
+   (holoflow/geometry/pointcloud.py);
 2. occlusion edges that the depth draws as ramps made steps (holoflow/geometry/edges.py);
 3. per-pixel depth noise smoothed within each surface, never across an edge, and each pixel's surface
    normal (holoflow/geometry/surfaces.py): the Gaussians lie on their surfaces;
@@ -36,6 +38,7 @@ from holoflow.geometry.area import called_for, equirect_to_area_points, polar_ca
 from holoflow.geometry.config import PointCloudParams
 from holoflow.geometry.edges import snap_depth_edges
 from holoflow.geometry.layers import background_layer
+from holoflow.geometry.openings import keep_opening_bars
 from holoflow.geometry.pointcloud import (
     depth_gradient_mask,
     equirect_to_points,
@@ -80,6 +83,9 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
     clouds, counts, extra = {}, {}, {}
     for i, (name, width) in enumerate({"p0": cfg.p0_width, "pf": pf_width, "ps": cfg.ps_width}.items()):
         col, d = resample_rgbd(srgb, depth, width)
+        if cfg.opening_bars:
+            d, found = keep_opening_bars(col, d, colour_tol=cfg.opening_colour_tol)
+            counts[f"{name}_opening_bar_pixels"] = found["bar_pixels"]
         sky = ~(torch.isfinite(d) & (d > 0))
         d = sky_to_shell(d, shell)
         if name == "pf":

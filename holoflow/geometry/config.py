@@ -117,6 +117,16 @@ class PointCloudParams(StageParams):
         "it is); 0 = smooth_range always",
         ge=0,
     )
+    opening_bars: bool = param(
+        True,
+        "window bars kept in their window: inside a sky region enclosed by the room, pixels whose "
+        "colour is not the sky's and that hold onto the opening's border get the depth of the frame's "
+        "plane instead of the far shell (holoflow/geometry/openings.py); a network blurs them into the "
+        "sky, and P_f's grid drops bars thinner than its pixels",
+    )
+    opening_colour_tol: float = param(
+        0.06, "opening_bars: how far (sRGB distance) from the sky's fitted colour a pixel is a bar", gt=0
+    )
     sky_dome: bool = param(
         True,
         "where the panorama shows sky, P_f gets a coarse sky dome behind everything, "
