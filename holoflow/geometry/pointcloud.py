@@ -42,13 +42,21 @@ def depth_gradient(radial_depth: torch.Tensor, one_sided: bool = False) -> torch
     """Relative depth gradient g [H, W] per pixel (module docstring); inf/nan where depth is not finite > 0.
     one_sided: along each axis the smaller of the two one-sided differences instead of the central one,
     so a pixel beside a step (one neighbour on its own surface) scores its own surface's slope and only
-    a pixel that differs from both neighbours (on a ramp, or alone) scores high."""
+    a pixel that differs from both neighbours (on a ramp, or alone) scores high; a pixel nearer than
+    both neighbours along one axis only (a line one pixel thick in front of what is behind it) scores
+    the other axis alone."""
     D = radial_depth
     P = pad_equirect(D[None], 1)[0]  # [H + 2, W + 2]
     if one_sided:
         c = P[1:-1, 1:-1]
-        gx = torch.minimum((P[1:-1, 2:] - c).abs(), (c - P[1:-1, :-2]).abs())
-        gy = torch.minimum((P[2:, 1:-1] - c).abs(), (c - P[:-2, 1:-1]).abs())
+        left, right, up, down = P[1:-1, :-2], P[1:-1, 2:], P[:-2, 1:-1], P[2:, 1:-1]
+        gx = torch.minimum((right - c).abs(), (c - left).abs())
+        gy = torch.minimum((down - c).abs(), (c - up).abs())
+        # a line one pixel thick (a window bar, a stem): nearer than both neighbours across it, on its own
+        # surface along it; that axis is its silhouette, not a ramp (a lone pixel, nearer along both, is not)
+        thin_x, thin_y = (c < left) & (c < right), (c < up) & (c < down)
+        gx = torch.where(thin_x & ~thin_y, torch.zeros_like(gx), gx)
+        gy = torch.where(thin_y & ~thin_x, torch.zeros_like(gy), gy)
     else:
         gx = 0.5 * (P[1:-1, 2:] - P[1:-1, :-2])
         gy = 0.5 * (P[2:, 1:-1] - P[:-2, 1:-1])

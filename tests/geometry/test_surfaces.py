@@ -186,18 +186,22 @@ def test_no_gaussian_spans_the_gap_between_a_box_and_the_wall(edge_radius, stret
     assert float(2 * along[face].max()) < 0.15
 
 
-@pytest.mark.parametrize("sides, whole", [("one_sided", True), ("central", False)])
-def test_a_thin_near_bar_keeps_its_points(sides, whole):
-    """A bar two pixels wide at 1 m before a wall at 3 m (a window bar, a lamp's stem): with the one-sided
-    gradient filter (the default) every one of its pixels becomes a point; the paper's central
-    differences drop both, as each lies beside a step."""
+@pytest.mark.parametrize("sides, width, whole", [("one_sided", 2, True), ("one_sided", 1, True), ("central", 2, False)])
+def test_a_thin_near_bar_keeps_its_points(sides, width, whole):
+    """A bar one or two pixels wide at 1 m before a wall at 3 m (a window bar, a lamp's stem): with the
+    one-sided gradient filter (the default) every one of its pixels becomes a point; the paper's central
+    differences drop them, as each lies beside a step. The one-sided filter drops a lone pixel at 1 m (a
+    flying pixel), which the central differences cannot see."""
     H, W = 64, 128
     depth = torch.full((H, W), 3.0, dtype=torch.float64)
-    depth[10:50, 60:62] = 1.0
+    depth[10:50, 60 : 60 + width] = 1.0
+    depth[30, 100] = 1.0  # alone
     rgb = torch.full((H, W, 3), 0.5)
     pc = PointCloudParams(
         pf_width=W, pf_sampling="grid", layer_baseline=0.0, pf_polar_density=1.0, grad_sides=sides, sky_dome=False
     )
     xyz = point_clouds(rgb, depth, pc).clouds["pf"].xyz
-    on_bar = int((torch.linalg.vector_norm(xyz, dim=-1) < 1.5).sum())
-    assert on_bar == (80 if whole else 0)
+    near = torch.linalg.vector_norm(xyz, dim=-1) < 1.5
+    lone = near & (xyz[:, 0] > 0.5)  # the lone pixel's direction is far right of the bar
+    assert int((near & ~lone).sum()) == (40 * width if whole else 0)
+    assert int(lone.sum()) == (0 if sides == "one_sided" else 1)
