@@ -41,8 +41,8 @@ def keep_opening_bars(
     max_fraction: float = 0.05,
 ) -> tuple[torch.Tensor, dict]:
     """The module docstring's steps on srgb [H, W, 3] and radial depth [H, W] (metres, non-finite = sky):
-    (the depth with every bar pixel at its frame's plane [H, W], {"openings": how many were fitted,
-    "bar_pixels": how many pixels left the sky})."""
+    (the depth with every bar pixel at its frame's plane [H, W], {"openings": how many sky regions were
+    openings, "bar_pixels": how many pixels left the sky})."""
     import cv2
 
     from holoflow.geometry.sphere import equirect_directions
@@ -51,12 +51,10 @@ def keep_opening_bars(
     d = depth.detach().cpu().double().numpy()
     col = srgb.detach().cpu().double().numpy()
     sky = ~(np.isfinite(d) & (d > 0))
-    stats = {"openings": 0, "bar_pixels": 0}
-    if not sky.any():
-        return depth, stats
+    out = d.copy()
+    found = {"openings": 0, "bar_pixels": 0}
     n, labels, boxes, _ = cv2.connectedComponentsWithStats(sky.astype(np.uint8), connectivity=8)
     dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
-    out = d.copy()
     pad = ring_px + 2
     for i in range(1, n):
         x, y, w, h, area = (int(v) for v in boxes[i])
@@ -64,28 +62,24 @@ def keep_opening_bars(
             continue
         y0, y1, x0, x1 = max(0, y - pad), min(H, y + h + pad), max(0, x - pad), min(W, x + w + pad)
         comp = labels[y0:y1, x0:x1] == i
-        bars = _bar_pixels(col[y0:y1, x0:x1], comp, colour_tol)
-        if not bars.any():
-            continue
-        ring = _dilate(comp, ring_px) & ~_dilate(comp, 1) & ~sky[y0:y1, x0:x1]
-        if ring.sum() < 12:
-            continue
-        u = dirs[y0:y1, x0:x1]
-        points = u[ring] * d[y0:y1, x0:x1][ring][:, None]  # [R, 3] metres
-        plane = _robust_plane(points)
-        if plane is None:
-            continue
-        normal, offset = plane
-        cos = u[bars] @ normal  # [B]
-        ring_d = d[y0:y1, x0:x1][ring]
-        t = np.where(np.abs(cos) > 1e-6, offset / np.where(np.abs(cos) > 1e-6, cos, 1.0), np.inf)
-        t = np.where(t > 0, t, np.inf)
-        t = np.clip(t, ring_d.min() / 1.5, ring_d.max() * 1.5)  # a plane seen edge-on throws no bar away
-        view = out[y0:y1, x0:x1]
-        view[bars] = t
-        stats["openings"] += 1
-        stats["bar_pixels"] += int(bars.sum())
-    return torch.from_numpy(out).to(depth.dtype).to(depth.device), stats
+        resid, sigma = _sky_fit(col[y0:y1, x0:x1], comp)
+        found["openings"] += 1
+        bars = _bar_pixels(comp, resid, sigma, colour_tol)
+        plane = None
+        if bars.any():
+            ring = _dilate(comp, ring_px) & ~_dilate(comp, 1) & ~sky[y0:y1, x0:x1]
+            u = dirs[y0:y1, x0:x1]
+            ring_d = d[y0:y1, x0:x1][ring]
+            plane = _robust_plane(u[ring] * ring_d[:, None]) if ring.sum() >= 12 else None
+        if plane is not None:
+            normal, offset = plane
+            cos = u[bars] @ normal  # [B]
+            t = np.where(np.abs(cos) > 1e-6, offset / np.where(np.abs(cos) > 1e-6, cos, 1.0), np.inf)
+            t = np.where(t > 0, t, np.inf)
+            t = np.clip(t, ring_d.min() / 1.5, ring_d.max() * 1.5)  # a plane seen edge-on throws no bar away
+            out[y0:y1, x0:x1][bars] = t
+            found["bar_pixels"] += int(bars.sum())
+    return torch.from_numpy(out).to(depth.dtype).to(depth.device), found
 
 
 def _dilate(mask: np.ndarray, r: int) -> np.ndarray:
@@ -95,29 +89,39 @@ def _dilate(mask: np.ndarray, r: int) -> np.ndarray:
     return cv2.dilate(mask.astype(np.uint8), np.ones((2 * r + 1, 2 * r + 1), np.uint8)).astype(bool)
 
 
-def _bar_pixels(col: np.ndarray, comp: np.ndarray, colour_tol: float) -> np.ndarray:
-    """The opening comp [h, w]'s pixels whose colour col [h, w, 3] is not the sky's and whose outlier
-    region touches the opening's border and reaches 2 px inside it (step 3)."""
-    import cv2
-
+def _sky_fit(col: np.ndarray, comp: np.ndarray) -> tuple[np.ndarray, float]:
+    """The sky's colour over the opening comp [h, w] (step 2): a quadratic in the pixel coordinates per
+    channel, Tukey-reweighted so bars and frame pixels do not pull it. Returns (each pixel's distance
+    from it [P], P = comp's pixels in row-major order, and the robust sigma of the distances of the
+    pixels the fit kept)."""
     yy, xx = np.nonzero(comp)
-    if len(yy) < 16:
-        return np.zeros_like(comp)
     sy, sx = max(1.0, (yy.max() - yy.min()) / 2), max(1.0, (xx.max() - xx.min()) / 2)
     a, b = (yy - yy.mean()) / sy, (xx - xx.mean()) / sx
     design = np.stack([np.ones_like(a), a, b, a * a, a * b, b * b], 1)  # [P, 6]
     c = col[comp]  # [P, 3]
-    weights = np.ones(len(c))
-    for _ in range(6):
+    resid = np.linalg.norm(c - np.median(c, 0), axis=1)  # start from the median colour
+    for _ in range(8):
+        # the scale from the best 30 % (a Gaussian's |x| has 0.385 sigma there): bars and the pixels
+        # that mix them in can be half of a small pane, which would inflate a median's scale
+        scale = max(float(np.quantile(resid, 0.3)) / 0.385, 1e-3)
+        weights = np.clip(1 - (resid / (TUKEY_C * scale)) ** 2, 0, None) ** 2
         sw = np.sqrt(weights)[:, None]
         coef, *_ = np.linalg.lstsq(design * sw, c * sw, rcond=None)
         resid = np.linalg.norm(c - design @ coef, axis=1)  # [P]
-        scale = max(1.4826 * float(np.median(resid)), 1e-3)
-        weights = np.clip(1 - (resid / (TUKEY_C * scale)) ** 2, 0, None) ** 2
+    scale = max(float(np.quantile(resid, 0.3)) / 0.385, 1e-3)
+    weights = np.clip(1 - (resid / (TUKEY_C * scale)) ** 2, 0, None) ** 2
     inlier = resid[weights > 0]
-    sigma = 1.4826 * float(np.median(inlier)) if len(inlier) else 0.0
+    return resid, 1.4826 * float(np.median(inlier)) if len(inlier) else 0.0
+
+
+def _bar_pixels(comp: np.ndarray, resid: np.ndarray, sigma: float, colour_tol: float) -> np.ndarray:
+    """The opening comp [h, w]'s pixels whose colour is off the sky's fit (resid [P] and sigma of
+    ``_sky_fit``) by more than colour_tol and 4 sigmas, and whose outlier region touches the opening's border and
+    reaches 2 px inside it (step 3), with their one-pixel rim."""
+    import cv2
+
     odd = np.zeros_like(comp)
-    odd[yy, xx] = resid > max(colour_tol, 4 * sigma)
+    odd[comp] = resid > max(colour_tol, 4 * sigma)
     if not odd.any():
         return odd
     inner = cv2.erode(comp.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)

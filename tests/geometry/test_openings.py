@@ -1,6 +1,8 @@
 """Window bars kept in their window (holoflow/geometry/openings.py): bars the depth lost to the sky get
-the frame's plane, the sky between them stays sky, a cloud in a pane and an open sky stay untouched."""
+the frame's plane, also where the sky beside them mixes them in; the sky between them stays sky, a
+cloud in a pane and an open sky stay untouched."""
 
+import pytest
 import torch
 
 from holoflow.geometry.clouds import point_clouds
@@ -44,10 +46,15 @@ def _ring_of(mask: torch.Tensor) -> torch.Tensor:
     return grown
 
 
-def test_bars_lost_to_the_sky_get_the_frames_plane_and_the_panes_stay_sky():
+@pytest.mark.parametrize("mixed", [False, True])
+def test_bars_lost_to_the_sky_get_the_frames_plane_and_the_panes_stay_sky(mixed):
+    """mixed: the sky pixels beside a bar are half bar (an antialiased panorama), a third of the window."""
     rgb, depth, bar, panes = _wall_with_window()
-    out, stats = keep_opening_bars(rgb, depth)
-    assert stats["openings"] == 1 and stats["bar_pixels"] >= int(bar.sum())
+    if mixed:
+        rim = _ring_of(bar) & panes
+        rgb[rim] = 0.5 * rgb[rim] + 0.5 * 0.8
+    out, found = keep_opening_bars(rgb, depth)
+    assert found["openings"] == 1 and found["bar_pixels"] >= int(bar.sum())
     dirs = equirect_directions(H, W, dtype=torch.float64)
     plane = WALL_Z / dirs[..., 2]
     assert torch.allclose(out[bar], plane[bar], rtol=1e-3)  # on the wall's plane, not on the shell
@@ -59,12 +66,12 @@ def test_bars_lost_to_the_sky_get_the_frames_plane_and_the_panes_stay_sky():
 
 def test_a_window_without_bars_a_cloud_in_a_pane_and_an_open_sky_stay_as_they_are():
     rgb, depth, _, _ = _wall_with_window(bars=False, cloud=True)
-    out, stats = keep_opening_bars(rgb, depth)
-    assert stats["bar_pixels"] == 0 and torch.equal(out, depth)
+    out, found = keep_opening_bars(rgb, depth)
+    assert found == {"openings": 1, "bar_pixels": 0} and torch.equal(out, depth)
     rgb, depth, _, _ = _wall_with_window()
     depth[:40] = float("inf")  # the sky reaches the zenith: outdoors, not an opening
-    out, stats = keep_opening_bars(rgb, depth)
-    assert stats["openings"] == 0 and torch.equal(out, depth)
+    out, found = keep_opening_bars(rgb, depth)
+    assert found["openings"] == 0 and torch.equal(out, depth)
 
 
 def test_point_clouds_put_the_bars_on_the_wall_only_when_asked():
