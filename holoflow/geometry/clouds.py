@@ -136,7 +136,15 @@ def _pf_cloud(
     layer = None
     if cfg.layer_baseline > 0:  # the far side continued under the silhouettes
         layer = background_layer(
-            col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg, cfg.layer_stride, cfg.layer_slope
+            col,
+            d,
+            keep,
+            cfg.layer_baseline,
+            cfg.layer_tol,
+            cfg.layer_max_deg,
+            cfg.layer_stride,
+            cfg.layer_slope,
+            shell,
         )
     d = torch.where(keep, d, torch.full_like(d, float("nan")))
     caps, detail = None, None

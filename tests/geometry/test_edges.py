@@ -66,19 +66,15 @@ def ramped_box_cloud(H: int, W: int, ramp: int, snap: bool, slope: bool) -> tupl
 
 
 @pytest.mark.parametrize(
-    "ramp, eye_m, snap, slope, holes",
-    [
-        (3, 1.0, True, False, False),
-        (3, 1.0, False, False, True),  # the ramps made steps, or kept
-        (7, 0.5, True, False, False),
-        (7, 0.5, True, True, True),  # the layer at its edge's depth, or sloped
-    ],
+    "ramp, eye_m, snap, slope",
+    [(3, 1.0, True, False), (3, 1.0, False, False), (7, 0.5, True, False), (7, 0.5, True, True)],
 )
-def test_box_with_ramped_depth_off_centre(ramp, eye_m, snap, slope, holes):
+def test_box_with_ramped_depth_off_centre(ramp, eye_m, snap, slope):
     """The footprint Gaussians of P_f + layer (transfer_opt's init) rendered ``eye_m`` right of the
-    centre (the layer's baseline is 1 m), looking past the box. The stage's defaults (ramps snapped,
-    no slope) leave no pixel empty; kept ramps start the layer at their intermediate depths, and a
-    slope taken across a wide ramp throws the layer off the wall: holes open."""
+    centre (the layer's baseline is 1 m), looking past the box: no pixel empty with the stage's
+    defaults (ramps snapped, no slope), and none either where kept ramps start the layer at their
+    intermediate depths or a slope across a wide ramp throws it off the wall: the farthest layer takes
+    over under them (holoflow/geometry/layers.py)."""
     from holoflow.recon.optimize import init_model
     from holoflow.splat import render
 
@@ -96,8 +92,4 @@ def test_box_with_ramped_depth_off_centre(ramp, eye_m, snap, slope, holes):
     V = look_at(eye, eye + torch.tensor([[0.0, 0.0, 1.0]]))
     with torch.no_grad():
         alpha = render(model, V, K[None], size, size, backend="cpu")["alpha"][0, ..., 0]
-    empty = int((alpha < 0.5).sum())
-    if holes:
-        assert empty > 0.01 * size * size
-    else:
-        assert empty == 0
+    assert int((alpha < 0.5).sum()) == 0

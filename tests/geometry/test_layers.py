@@ -191,3 +191,27 @@ def test_box_scene_after_a_tiny_optimisation(with_layer):
         assert not empty.any()
     else:
         assert empty.double().sum() > 0.3 * hidden.double().sum()
+
+
+def _two_silhouettes(H=64, W=128):
+    """A far wall at 3 m (columns < 40), a near slab at 1 m (40..47), a middle wall at 1.4 m (>= 48): both
+    walls continue under the slab, and a step to the side shows the farthest of them behind it."""
+    d = torch.full((H, W), 1.4, dtype=torch.float64)
+    d[:, :40] = 3.0
+    d[:, 40:48] = 1.0
+    rgb = RED.expand(H, W, 3).clone()
+    return rgb, d, depth_gradient_mask(d, 0.4, one_sided=True)
+
+
+def test_the_farthest_surface_takes_the_layer_over_and_the_sky_never_does():
+    """Where the layers of two silhouettes meet, the farther surface carries on under the nearer one's
+    layer (a move uncovers what lies behind both: an evl_room_B door jamb left 20 % of a view empty
+    0.5 m off the centre when the first layer to arrive kept its pixels); the sky's shell, with the
+    sky dome behind everything, never takes a pixel over."""
+    rgb, d, keep = _two_silhouettes()
+    ld, _ = background_layer(rgb, d, keep, 1.0)
+    row = ld[32, 40:48]
+    assert torch.allclose(row, torch.full_like(row, 3.0))  # every pixel under the slab: the far wall
+    ld, _ = background_layer(rgb, d, keep, 1.0, shell=3.0)  # the far surface is the sky's shell
+    row = ld[32, 40:48]
+    assert bool((row < 2.0).any()) and bool((row > 2.0).any())  # each keeps what reached it first
