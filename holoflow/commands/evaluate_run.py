@@ -47,6 +47,13 @@ def parser(prog: str = "holoflow eval run") -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the novel cameras and the NIQE / BRISQUE subset")
     p.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
     p.add_argument(
+        "--rig",
+        default="edges",
+        choices=["edges", "rings"],
+        help="novel eyes: edges = moved short of the run's depth, looking sideways or back at its edges; "
+        "rings = the truth sets' fixed eyes (8 a ring, sideways and back), the same for every run",
+    )
+    p.add_argument(
         "--out",
         type=Path,
         default=None,
@@ -83,7 +90,12 @@ def main(argv: list[str] | None = None, prog: str = "holoflow eval run") -> int:
     t0 = time.monotonic()
     info = st.run_info(run_id) or {}
     spec = ViewingSpec(
-        size=args.size, fov_deg=args.fov, nr_cameras=args.nr_cameras, seed=args.seed, backend=args.backend
+        size=args.size,
+        fov_deg=args.fov,
+        nr_cameras=args.nr_cameras,
+        seed=args.seed,
+        backend=args.backend,
+        rig=args.rig,
     )
     r, _ = score_run(run_dir, info, spec)
     r.update(

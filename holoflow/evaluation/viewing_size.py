@@ -19,7 +19,8 @@ The paper's Table II protocol taken where a viewer looks, not at the training si
   render / source (a photo has its own score; 1.0 = as natural as the source).
 - **novel**: ``per_distance`` cameras at each distance of ``distances`` metres off the centre
   (``novel_rig``: eyes moved in several directions, looking sideways or back at the strong edges of
-  the run's depth, ``edge_targets``), each scored by its EMPTY fraction (pixels whose rendered alpha <
+  the run's depth, ``edge_targets``; or, with ``rig`` "rings", ``ring_rig``: the truth sets' fixed
+  eyes), each scored by its EMPTY fraction (pixels whose rendered alpha <
   ``empty_alpha``), its CRACKED fraction (alpha < ``crack_alpha``), NIQE / BRISQUE of the renders
   against the source's views of ``nr`` (``novel_nr``; sizes >= 192 px) and, where truth exists (a
   procedural base_pano with its scene.json), PSNR against the true render.
@@ -59,6 +60,7 @@ class ViewingSpec:
     seed: int = 0
     backend: str = "cpu"
     novel_nr: bool = True
+    rig: str = "edges"  # novel eyes: edges = novel_rig at the depth's edges; rings = ring_rig (fixed eyes)
 
 
 # Goals per profile: psnr (dB, at least), brisque / niqe (ratio render / source, at most),
@@ -313,6 +315,18 @@ def novel_rig(
     return torch.cat(vms).float(), torch.cat(offs)
 
 
+def ring_rig(distances: tuple[float, ...], per_distance: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The truth sets' eyes (``truth_set.ring_eyes``) as a novel rig: per distance d, ``per_distance``
+    eyes d metres off the centre, each looking horizontally sideways or back from where it moved, the
+    same for every run whatever its depth (no wall margin: an eye may stand in a wall of a small room).
+    Returns (viewmats [D * per_distance, 4, 4] float32, offsets [D * per_distance] m)."""
+    from holoflow.evaluation.truth_set import eye_viewmat, ring_eyes
+
+    eyes = ring_eyes(tuple(distances), per_distance)
+    vms = torch.stack([eye_viewmat(e["eye"], e["look"]) for e in eyes]).float()
+    return vms, torch.tensor([e["ring"] for e in eyes], dtype=torch.float64)
+
+
 def pick_targets(
     targets, move: torch.Tensor, turn: torch.Tensor, g: torch.Generator, min_turn_deg: float, window_deg: float
 ) -> torch.Tensor:
@@ -484,9 +498,12 @@ def score_run(
         depth = torch.from_numpy(read_exr(depth_file)[0]["Z"])
         free = lambda dirs: free_distance(depth, dirs)  # noqa: E731
         targets = edge_targets(depth)
-    nvm, offsets = novel_rig(
-        spec.distances, spec.per_distance, spec.seed, free, spec.pitch_deg, spec.wall_margin, targets
-    )
+    if spec.rig == "rings":
+        nvm, offsets = ring_rig(spec.distances, spec.per_distance)
+    else:
+        nvm, offsets = novel_rig(
+            spec.distances, spec.per_distance, spec.seed, free, spec.pitch_deg, spec.wall_margin, targets
+        )
     nrgb, nalpha = render_at(model, nvm, K, spec.size, spec.backend)
     t["render_novel"] = time.monotonic() - t0
     t0 = time.monotonic()
@@ -584,14 +601,18 @@ def table(scores: dict, profile: str | None) -> list[str]:
         f"{scores['gaussians']} Gaussians",
         f"  {'':42s}{'measured':>10s}   goal ({name})",
     ]
+    eyes = (
+        "novel eyes: the truth sets' rings (fixed eyes looking sideways and back, docs/truth-sets.md)"
+        if s.get("rig") == "rings"
+        else f"novel eyes move horizontally (<= {s['wall_margin']} m short of the run's depth) and look "
+        f"sideways or back at the depth's edges ({scores.get('edge_targets', 0)} found), seed {s['seed']}"
+    )
     foot = [
         f"PSNR / SSIM: means of the per-camera values over the base cameras more than {s['pole_deg']} deg from "
         "the poles (sRGB; pooled: the PSNR of their pooled squared error, which easy flat views do not lift); "
         f"zenith/nadir: the cameras within {s['pole_deg']} deg of them. NIQE / BRISQUE (lower is better): means "
         f"over {nr.get('cameras', 0)} of those cameras, render / source. Empty: alpha < {s['empty_alpha']}; "
-        f"novel eyes move horizontally (<= {s['wall_margin']} m short of the run's depth) and look sideways or "
-        f"back at the depth's edges ({scores.get('edge_targets', 0)} found), seed {s['seed']}; their NIQE / "
-        "BRISQUE: against the same source views.",
+        f"{eyes}; their NIQE / BRISQUE: against the same source views.",
         "Paper Table II (at 512 px, its own generated panoramas): PSNR 40.19 dB, SSIM 0.984.",
     ]
     return head + rows + [f"  note: {n}" for n in scores.get("notes", [])] + foot

@@ -114,6 +114,24 @@ def test_novel_rig_is_seeded_and_stays_short_of_walls():
     assert (fwd[0] * move[0]).sum() > 0.8 and (fwd[2] * move[2]).sum() < -0.8
 
 
+def test_ring_rig_is_the_truth_sets_eyes_for_every_run():
+    """The rings rig: the truth sets' eyes (ring_eyes), whatever the depth: 8 a ring at 0.5 and 1 m, each
+    looking horizontally sideways or back from where it moved, never along its move."""
+    from holoflow.evaluation.truth_set import eye_viewmat, ring_eyes
+    from holoflow.geometry.camera import camera_centers
+
+    vm, off = viewing.ring_rig((0.5, 1.0), 8)
+    eyes = ring_eyes((0.5, 1.0), 8)
+    assert torch.equal(vm, torch.stack([eye_viewmat(e["eye"], e["look"]) for e in eyes]).float())
+    assert off.tolist() == [0.5] * 8 + [1.0] * 8
+    centres = camera_centers(vm.double())
+    assert torch.allclose(centres.norm(dim=1), off, atol=1e-5)
+    fwd = vm[:, 2, :3].double()  # the optical axis in world
+    assert torch.allclose(fwd[:, 1], torch.zeros(16, dtype=torch.float64), atol=1e-6)
+    along = (fwd * centres / centres.norm(dim=1, keepdim=True)).sum(1)
+    assert float(along.max()) < 0.5  # sideways (cos 90 deg) or back, never toward the move
+
+
 def test_free_distance_reads_the_depth_panorama():
     from holoflow.geometry.sphere import equirect_directions
 
