@@ -16,7 +16,8 @@ on its equirect grid:
    one-sided by default (``grad_sides``): with the ramps made steps, each side of an edge keeps its own
    pixels, so a thin near object (a window bar, a lamp's stem) keeps its points;
 5. the background layer: the far surface and the sky shell continued under every silhouette, as wide
-   as an eye move of ``layer_baseline`` metres uncovers (holoflow/geometry/layers.py); where the
+   as an eye move of ``layer_baseline`` metres uncovers (holoflow/geometry/layers.py): each
+   silhouette's own far side, and where a farther surface reaches under it, that one too; where the
    panorama shows sky, a sky dome behind everything (``sky_dome``): one coarse point per direction that
    is not sky, just beyond the shell, coloured by the sky around it (``fill_from``), so that an eye
    off the centre looking out of a window past its frame sees sky, never the void;
@@ -133,19 +134,13 @@ def _pf_cloud(
     d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise)
     normals = surface_normals(d, cfg.layer_tol)  # [h, w, 3]
     keep = depth_gradient_mask(d, cfg.grad_threshold, cfg.grad_sides == "one_sided")
-    layer = None
-    if cfg.layer_baseline > 0:  # the far side continued under the silhouettes
-        layer = background_layer(
-            col,
-            d,
-            keep,
-            cfg.layer_baseline,
-            cfg.layer_tol,
-            cfg.layer_max_deg,
-            cfg.layer_stride,
-            cfg.layer_slope,
-            shell,
-        )
+    layers = []
+    if cfg.layer_baseline > 0:  # the far sides continued under the silhouettes: each its own, then the farthest
+        args = (col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg, cfg.layer_stride, cfg.layer_slope)
+        own = background_layer(*args, shell=shell, farthest=False)
+        far = background_layer(*args, shell=shell, farthest=True)
+        behind = torch.isfinite(far[0]) & ~(torch.isfinite(own[0]) & (far[0] < own[0] * (1 + cfg.layer_tol)))
+        layers = [own, (torch.where(behind, far[0], torch.full_like(far[0], math.inf)), far[1])]
     d = torch.where(keep, d, torch.full_like(d, float("nan")))
     caps, detail = None, None
     if cfg.pf_sampling == "area":
@@ -163,11 +158,11 @@ def _pf_cloud(
         xyz, c = equirect_to_points(col, d)
         n = normals[torch.isfinite(d) & (d > 0)]
     counts = {"pf_dropped_fraction": round(float((~keep).double().mean()), 6)}
-    if layer is not None:  # the layer continues a far surface seen head on from the centre: discs face it
-        lxyz, lc = equirect_to_points(layer[1], layer[0])
-        ldirs = equirect_directions(*layer[0].shape, dtype=lxyz.dtype)[torch.isfinite(layer[0]) & (layer[0] > 0)]
+    for ld, lcol in layers:  # the layer continues a far surface seen head on from the centre: discs face it
+        lxyz, lc = equirect_to_points(lcol, ld)
+        ldirs = equirect_directions(*ld.shape, dtype=lxyz.dtype)[torch.isfinite(ld) & (ld > 0)]
         xyz, c, n = torch.cat([xyz, lxyz]), torch.cat([c, lc]), torch.cat([n, -ldirs.to(n.dtype)])
-        counts["pf_layer"] = int(len(lxyz))
+        counts["pf_layer"] = counts.get("pf_layer", 0) + int(len(lxyz))
     dome_width = max(8, col.shape[1] // cfg.sky_dome_coarse)
     if cfg.sky_dome and bool(sky.any()):
         dxyz, dc = sky_dome(col, sky, shell * 1.05, dome_width)

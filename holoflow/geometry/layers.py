@@ -17,10 +17,12 @@ source pixels themselves, each carrying its own surface) when that value lies be
 surface by more than ``tol`` (relative) and the pixel is within the band of that value. Among the
 candidates within ``tol`` of the farthest depth, the one with the shortest path from its edge
 carries on, and their colours are averaged (the far side's colour, streaked along the front; never
-the near object's). A pixel that has a layer value takes a farther one (by more than ``tol``) when
-a front reaches it later: where the layers of two silhouettes meet, a step to the side shows the
-farthest surface behind both (a door jamb, a wall beyond a cupboard), so that one carries on; the
-sky's shell never takes a pixel over (the sky dome stands behind everything). The layer keeps the
+the near object's). With ``farthest``, a pixel that has a layer value takes a farther one (by more
+than ``tol``) when a front reaches it later: where the layers of two silhouettes meet, a step to
+the side shows the farthest surface behind both (a door jamb, a wall beyond a cupboard), so that one
+carries on; the sky's shell never takes a pixel over (the sky dome stands behind everything).
+Without it the first layer to reach a pixel keeps it: each silhouette's own far side. P_f takes
+both (holoflow/geometry/clouds.py): the first layers, and the farthest where it lies behind them. The layer keeps the
 depth of its edge pixel, or with ``slope`` is extrapolated
 linearly in inverse depth along the growth direction from the two source pixels at the edge (planes
 stay nearly planar: 1 / depth is affine along an image line under a pinhole; on the sphere locally),
@@ -57,6 +59,7 @@ def background_layer(
     stride: int = 1,
     slope: bool = False,
     shell: float = math.inf,
+    farthest: bool = True,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The far surfaces continued under the near silhouettes (module docstring).
 
@@ -65,8 +68,10 @@ def background_layer(
     P_f's kept pixels); baseline:
     the largest eye move (m) whose disocclusions the layer must cover; tol: relative depth step that
     counts as an occlusion edge; max_deg: cap on the band's width; slope: extrapolate the far
-    surface's inverse-depth slope (module docstring); shell: the sky's shell radius (m), whose layer
-    never takes a pixel over from a nearer one (the sky dome is behind everything); stride: keep the layer on every
+    surface's inverse-depth slope (module docstring); farthest: a farther surface takes a pixel over
+    from a nearer layer that reached it first (module docstring; False: the first to arrive keeps it,
+    each silhouette's own far side); shell: the sky's shell radius (m), whose layer never takes a
+    pixel over (the sky dome is behind everything); stride: keep the layer on every
     stride-th row and column only (the layer is seen from off the centre only: sparser points, whose
     Gaussians start larger, cost less training). Returns (layer depth [H, W] metres,
     inf where the pixel has no layer; layer colour [H, W, C], 0 there): an equirect RGB-D image whose
@@ -93,6 +98,7 @@ def background_layer(
         float(tol),
         math.radians(max_deg),
         1.0 / shell,
+        farthest,
         out_d,
         out_c,
         slope,
@@ -109,7 +115,7 @@ def background_layer(
 
 
 @njit(cache=True)
-def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, inv_shell, out_d, out_c, use_slope):
+def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, inv_shell, takeover, out_d, out_c, use_slope):
     """The growth rounds of ``background_layer``; fills out_d [H, W] (layer depth, inf = none) and
     out_c [H, W, C] in place."""
     H, W = d.shape
@@ -145,14 +151,14 @@ def _grow(d, src, near, col, coslat, step, baseline, tol, max_ang, inv_shell, ou
                         py, px = qy + dy, (qx + dx) % W
                         if (dy == 0 and dx == 0) or py < 0 or py >= H:
                             continue
-                        if stamp[py, px] != r:
+                        if stamp[py, px] != r and (takeover or rnd[py, px] < 0):
                             stamp[py, px] = r
                             cand[nc] = py * W + px
                             nc += 1
         nf_new = 0
         for c in range(nc):
             py, px = cand[c] // W, cand[c] % W
-            if rnd[py, px] == r:
+            if rnd[py, px] == r or (rnd[py, px] >= 0 and not takeover):
                 continue
             n_ok = 0
             for dy in range(-1, 2):

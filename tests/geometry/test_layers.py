@@ -212,6 +212,24 @@ def test_the_farthest_surface_takes_the_layer_over_and_the_sky_never_does():
     ld, _ = background_layer(rgb, d, keep, 1.0)
     row = ld[32, 40:48]
     assert torch.allclose(row, torch.full_like(row, 3.0))  # every pixel under the slab: the far wall
-    ld, _ = background_layer(rgb, d, keep, 1.0, shell=3.0)  # the far surface is the sky's shell
-    row = ld[32, 40:48]
-    assert bool((row < 2.0).any()) and bool((row > 2.0).any())  # each keeps what reached it first
+    for first in (background_layer(rgb, d, keep, 1.0, shell=3.0), background_layer(rgb, d, keep, 1.0, farthest=False)):
+        row = first[0][32, 40:48]  # the far surface is the sky's shell, or no layer takes over
+        assert bool((row < 2.0).any()) and bool((row > 2.0).any())  # each keeps what reached it first
+
+
+def test_pf_keeps_each_silhouettes_own_layer_and_the_farthest_behind_it():
+    """P_f's layer points: the first layer under the slab (each wall's own continuation) and, where the
+    far wall reaches under the middle wall's layer, the far wall too: both depths behind the slab's
+    columns that the middle wall's layer reached first."""
+    from holoflow.geometry.clouds import point_clouds
+    from holoflow.geometry.config import PointCloudParams
+
+    rgb, d, _ = _two_silhouettes()
+    cfg = PointCloudParams(pf_width=128, pf_sampling="grid", pf_polar_density=1.0, layer_stride=1, sky_dome=False)
+    pf = point_clouds(rgb, d, cfg)
+    layer = pf.clouds["pf"].xyz[-pf.pf["layer"]["points"] :]
+    r = torch.linalg.vector_norm(layer, dim=-1)
+    lon = torch.rad2deg(torch.atan2(layer[:, 0], layer[:, 2]))
+    under = (lon > -180 + 44 * 360 / 128) & (lon < -180 + 48 * 360 / 128) & (layer[:, 1].abs() < 0.1)
+    # columns 44..47, where the middle wall's layer arrives first: both walls lie behind the slab there
+    assert bool(((r[under] - 3.0).abs() < 0.05).any()) and bool(((r[under] - 1.4).abs() < 0.05).any())
