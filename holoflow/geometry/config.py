@@ -74,7 +74,8 @@ class PointCloudParams(StageParams):
         "the gradient filter's differences: central (the paper's: both pixels "
         "beside a step are dropped, and a thin object two pixels wide with them) or one_sided "
         "(a pixel is dropped only when it differs from both neighbours along an axis: on a ramp, "
-        "or alone; holoflow/geometry/pointcloud.py)",
+        "or alone; a line one pixel thick in front of what is behind it keeps its points; "
+        "holoflow/geometry/pointcloud.py)",
         choices=("one_sided", "central"),
     )
     sky_radius: float = param(
