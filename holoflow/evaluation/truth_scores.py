@@ -12,7 +12,13 @@ colour clamped to [0, 1]. Per ring (cameras.json ``ring``):
   the fraction with max(z / z*, z* / z) < 1.25; ``depth_coverage`` = the share of finite-truth pixels
   that had a rendered depth;
 - ``empty``: fraction of pixels with alpha < ``empty_alpha`` (0.5); ``cracked``: alpha < ``crack_alpha``
-  (0.9).
+  (0.9);
+- with the set's panorama (``pano_z.exr``): ``unseen``, the fraction of pixels whose surface the
+  panorama's centre never saw (``seen_from_centre``: behind something else from there, or sky where the
+  centre saw a frame), ``psnr_seen`` / ``psnr_unseen`` over each part, and ``psnr_panorama``: the
+  panorama itself resampled at each seen pixel's exact surface direction (``panorama_at_surfaces``),
+  against the truth: what a perfect geometry with the panorama's own colours scores there, the ceiling
+  of any scene built from that panorama.
 
 Pure functions of tensors, plus ``score_truth`` (files in, scores and pictures out).
 """
@@ -28,6 +34,7 @@ import torch
 EMPTY_ALPHA = 0.5
 CRACK_ALPHA = 0.9
 DELTA = 1.25
+SEEN_TOL = 0.01  # relative (+ 1 cm): a surface point this near the panorama's depth in its direction was seen
 
 
 def per_view_psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -63,6 +70,58 @@ def depth_errors(
     )
 
 
+def surface_points(viewmats: torch.Tensor, K: torch.Tensor, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """World points [V, H, W, 3] (metres; NaN where z is not finite) of the truth views' pixels, from
+    viewmats [V, 4, 4], K [3, 3] and camera z [V, H, W], and the pixels' unit ray directions [V, H, W, 3]."""
+    from holoflow.geometry.camera import pinhole_rays
+
+    V, H, W = z.shape
+    origins, dirs = pinhole_rays(K.double().expand(V, 3, 3), viewmats.double(), H, W)  # [V, H, W, 3]
+    cam_z = torch.einsum("vhwc,vc->vhw", dirs, viewmats.double()[:, 2, :3])  # camera z of each unit ray
+    t = torch.where(torch.isfinite(z), z.double() / cam_z, torch.full_like(cam_z, math.nan))
+    return origins + dirs * t[..., None], dirs
+
+
+def seen_from_centre(points: torch.Tensor, dirs: torch.Tensor, pano_depth: torch.Tensor) -> torch.Tensor:
+    """Which truth pixels show a surface the panorama's centre saw: points / dirs [V, H, W, 3]
+    (``surface_points``), pano_depth [Hp, Wp] radial metres (inf = sky). A finite point is seen when its
+    distance is within ``SEEN_TOL`` of the panorama's farthest depth over the 3 x 3 pixels around its
+    direction (a surface within a pixel of a silhouette counts as seen: at the centre, everything is); a
+    sky pixel when the panorama sees sky along the same direction. [V, H, W] bool."""
+    import torch.nn.functional as F
+
+    from holoflow.geometry.sampling import pad_equirect, sample_equirect
+
+    pd = pano_depth.double()
+    farthest = F.max_pool2d(pad_equirect(pd[None], 1), 3, stride=1)[0]  # [Hp, Wp]: 3 x 3 maximum
+    finite = torch.isfinite(points).all(-1)
+    r = torch.linalg.vector_norm(torch.nan_to_num(points), dim=-1)
+    u = torch.where(finite[..., None], torch.nan_to_num(points) / r.clamp_min(1e-9)[..., None], dirs)
+    at = sample_equirect(farthest[None], u, "nearest")[:, 0]  # [V, H, W]
+    sky_there = ~torch.isfinite(sample_equirect(pd[None], u, "nearest")[:, 0])
+    return torch.where(finite, r <= at * (1 + SEEN_TOL) + 0.01, sky_there)
+
+
+def panorama_at_surfaces(points: torch.Tensor, dirs: torch.Tensor, pano_srgb: torch.Tensor) -> torch.Tensor:
+    """The panorama pano_srgb [3, Hp, Wp] (sRGB) sampled bilinearly at the direction of each truth
+    pixel's surface point from the centre (``surface_points``; sky: the pixel's ray): [V, H, W, 3]."""
+    from holoflow.geometry.sampling import sample_equirect
+
+    finite = torch.isfinite(points).all(-1, keepdim=True)
+    u = torch.where(finite, torch.nan_to_num(points), dirs)
+    u = u / torch.linalg.vector_norm(u, dim=-1, keepdim=True).clamp_min(1e-9)
+    return sample_equirect(pano_srgb.double(), u, "bilinear").movedim(1, -1).float()
+
+
+def masked_psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
+    """PSNR dB of pred / target [V, H, W, 3] pooled over the pixels where mask [V, H, W]; NaN for none."""
+    n = int(mask.sum())
+    if n == 0:
+        return math.nan
+    mse = float(((pred.double() - target.double()) ** 2)[mask].mean())
+    return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
+
+
 def ring_scores(
     rgb: torch.Tensor,
     alpha: torch.Tensor,
@@ -71,9 +130,12 @@ def ring_scores(
     truth_z: torch.Tensor,
     empty_alpha: float = EMPTY_ALPHA,
     crack_alpha: float = CRACK_ALPHA,
+    seen: torch.Tensor | None = None,
+    panorama: torch.Tensor | None = None,
 ) -> dict:
     """Scores of one ring (module docstring): rgb / truth_rgb [V, H, W, 3] sRGB, alpha / depth / truth_z
-    [V, H, W]."""
+    [V, H, W]; seen [V, H, W] (``seen_from_centre``) and panorama [V, H, W, 3] (``panorama_at_surfaces``)
+    when the set has its panorama."""
     from holoflow.quality import metrics
 
     p = per_view_psnr(rgb, truth_rgb)
@@ -90,6 +152,13 @@ def ring_scores(
         per_view_cracked=[round(float(x), 5) for x in (alpha < crack_alpha).double().flatten(1).mean(1)],
     )
     out.update(depth_errors(depth, alpha, truth_z, empty_alpha))
+    if seen is not None:
+        out.update(
+            unseen=float((~seen).double().mean()),
+            psnr_seen=masked_psnr(rgb, truth_rgb, seen),
+            psnr_unseen=masked_psnr(rgb, truth_rgb, ~seen),
+            psnr_panorama=masked_psnr(panorama, truth_rgb, seen) if panorama is not None else math.nan,
+        )
     return out
 
 
@@ -127,10 +196,15 @@ def score_truth(model_file: Path, truth_dir: Path, backend: str = "cpu") -> tupl
     H, W = ts.rgb.shape[1:3]
     rgb, alpha, depth = render_truth_views(model, ts.viewmats, ts.K, W, H, backend)
     rings = torch.tensor(ts.rings)
+    pano = _read_panorama(ts.folder / ts.cameras.get("pano", "pano_z.exr"))
     scores, pictures = {}, {}
     for key in ring_keys(ts.rings):
         m = torch.isclose(rings, torch.tensor(float(key)))
-        scores[key] = ring_scores(rgb[m], alpha[m], depth[m], ts.rgb[m], ts.z[m])
+        seen = at = None
+        if pano is not None:
+            points, dirs = surface_points(ts.viewmats[m], ts.K, ts.z[m])
+            seen, at = seen_from_centre(points, dirs, pano[1]), panorama_at_surfaces(points, dirs, pano[0])
+        scores[key] = ring_scores(rgb[m], alpha[m], depth[m], ts.rgb[m], ts.z[m], seen=seen, panorama=at)
         pictures[key] = (ts.rgb[m], rgb[m])
     return dict(
         rings=scores,
@@ -142,6 +216,21 @@ def score_truth(model_file: Path, truth_dir: Path, backend: str = "cpu") -> tupl
     ), pictures
 
 
+def _read_panorama(path: Path) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """A truth set's panorama file (linear R, G, B + Z radial metres): (sRGB [3, H, W], depth [H, W]), or
+    None when the set has none."""
+    from holoflow.imageops.color import linear_to_srgb_torch
+    from holoflow.io.exr import read_exr
+
+    if not path.is_file():
+        return None
+    ch = read_exr(path)[0]
+    if "Z" not in ch:
+        return None
+    rgb = torch.from_numpy(np.stack([ch["R"], ch["G"], ch["B"]], -1).astype(np.float32))  # [H, W, 3]
+    return linear_to_srgb_torch(rgb).permute(2, 0, 1), torch.from_numpy(np.asarray(ch["Z"], np.float64))
+
+
 def _f(x, fmt: str) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else fmt.format(x)
 
@@ -150,7 +239,7 @@ def ring_table(scores: dict) -> list[str]:
     """The ring table as text lines: one row per ring."""
     head = (
         f"  {'ring':>6s} {'views':>5s} {'PSNR dB':>8s} {'mean':>7s} {'SSIM':>7s} {'AbsRel':>7s} {'d<1.25':>7s}"
-        f" {'empty %':>8s} {'a<0.9 %':>8s}"
+        f" {'empty %':>8s} {'a<0.9 %':>8s} {'unseen %':>8s} {'seen dB':>8s} {'unseen dB':>9s} {'pano dB':>8s}"
     )
     rows = [
         f"truth set {scores['truth']} ({scores['views']} views, {scores['size'][0]}x{scores['size'][1]} px); "
@@ -163,26 +252,37 @@ def ring_table(scores: dict) -> list[str]:
             f" {_f(r['psnr_mean'], '{:.2f}'):>7s} {_f(r['ssim'], '{:.4f}'):>7s}"
             f" {_f(r['abs_rel'], '{:.4f}'):>7s} {_f(r['delta1'], '{:.4f}'):>7s}"
             f" {_f(100 * r['empty'], '{:.2f}'):>8s} {_f(100 * r['cracked'], '{:.2f}'):>8s}"
+            f" {_f(_pct(r.get('unseen')), '{:.2f}'):>8s} {_f(r.get('psnr_seen'), '{:.2f}'):>8s}"
+            f" {_f(r.get('psnr_unseen'), '{:.2f}'):>9s} {_f(r.get('psnr_panorama'), '{:.2f}'):>8s}"
         )
     rows.append(
         "PSNR: pooled over the ring's pixels (mean: of the per-view values), sRGB; AbsRel / d<1.25: rendered "
         f"camera z vs the views' Z (finite truth, alpha >= {EMPTY_ALPHA}); empty: alpha < {EMPTY_ALPHA}; "
-        f"a<0.9: alpha < {CRACK_ALPHA}."
+        f"a<0.9: alpha < {CRACK_ALPHA}; unseen: surfaces the panorama's centre never saw (seen / unseen dB: "
+        "PSNR over each part); pano dB: the panorama itself at the seen surfaces' exact directions, the "
+        "ceiling of a scene built from it."
     )
     return rows
+
+
+def _pct(x: float | None) -> float | None:
+    return None if x is None else 100 * x
 
 
 def ring_markdown(scores: dict) -> list[str]:
     """The ring table as markdown lines (rows = rings)."""
     lines = [
-        "| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | empty % | alpha < 0.9 % |",
-        "|---|---|---|---|---|---|---|",
+        "| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | empty % | alpha < 0.9 % | unseen % | seen dB | "
+        "unseen dB | panorama dB |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for key, r in scores["rings"].items():
         lines.append(
             f"| {key} m | {_f(r['psnr'], '{:.2f}')} | {_f(r['ssim'], '{:.4f}')} | "
             f"{_f(r['abs_rel'], '{:.4f}')} | {_f(r['delta1'], '{:.4f}')} | {_f(100 * r['empty'], '{:.2f}')} | "
-            f"{_f(100 * r['cracked'], '{:.2f}')} |"
+            f"{_f(100 * r['cracked'], '{:.2f}')} | {_f(_pct(r.get('unseen')), '{:.2f}')} | "
+            f"{_f(r.get('psnr_seen'), '{:.2f}')} | {_f(r.get('psnr_unseen'), '{:.2f}')} | "
+            f"{_f(r.get('psnr_panorama'), '{:.2f}')} |"
         )
     return lines
 
