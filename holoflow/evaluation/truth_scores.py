@@ -42,9 +42,15 @@ def per_view_psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return -10.0 * torch.log10(((pred.double() - target.double()) ** 2).flatten(1).mean(1))
 
 
-def pooled_psnr(pred: torch.Tensor, target: torch.Tensor) -> float:
-    """PSNR dB of the squared error pooled over all pixels of pred / target [V, H, W, 3] in [0, 1]."""
-    mse = float(((pred.double() - target.double()) ** 2).mean())
+def pooled_psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> float:
+    """PSNR dB of the squared error pooled over all pixels of pred / target [V, H, W, 3] in [0, 1], or over
+    the pixels where mask [V, H, W] (NaN when it selects none)."""
+    err = (pred.double() - target.double()) ** 2
+    if mask is not None:
+        if not bool(mask.any()):
+            return math.nan
+        err = err[mask]
+    mse = float(err.mean())
     return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
 
 
@@ -113,15 +119,6 @@ def panorama_at_surfaces(points: torch.Tensor, dirs: torch.Tensor, pano_srgb: to
     return sample_equirect(pano_srgb.double(), u, "bilinear").movedim(1, -1).float()
 
 
-def masked_psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> float:
-    """PSNR dB of pred / target [V, H, W, 3] pooled over the pixels where mask [V, H, W]; NaN for none."""
-    n = int(mask.sum())
-    if n == 0:
-        return math.nan
-    mse = float(((pred.double() - target.double()) ** 2)[mask].mean())
-    return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
-
-
 def ring_scores(
     rgb: torch.Tensor,
     alpha: torch.Tensor,
@@ -155,9 +152,9 @@ def ring_scores(
     if seen is not None:
         out.update(
             unseen=float((~seen).double().mean()),
-            psnr_seen=masked_psnr(rgb, truth_rgb, seen),
-            psnr_unseen=masked_psnr(rgb, truth_rgb, ~seen),
-            psnr_panorama=masked_psnr(panorama, truth_rgb, seen) if panorama is not None else math.nan,
+            psnr_seen=pooled_psnr(rgb, truth_rgb, seen),
+            psnr_unseen=pooled_psnr(rgb, truth_rgb, ~seen),
+            psnr_panorama=pooled_psnr(panorama, truth_rgb, seen) if panorama is not None else math.nan,
         )
     return out
 

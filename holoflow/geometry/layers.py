@@ -22,9 +22,10 @@ than ``tol``) when a front reaches it later: where the layers of two silhouettes
 the side shows the farthest surface behind both (a door jamb, a wall beyond a cupboard), so that one
 carries on; the sky's shell never takes a pixel over (the sky dome stands behind everything).
 Without it the first layer to reach a pixel keeps it: each silhouette's own far side. P_f takes
-both (holoflow/geometry/clouds.py): the first layers, and the farthest where it lies behind them. The layer keeps the
-depth of its edge pixel, or with ``slope`` is extrapolated
-linearly in inverse depth along the growth direction from the two source pixels at the edge (planes
+both (holoflow/geometry/clouds.py): the first layers, and the farthest where it lies behind them.
+
+The layer keeps the depth of its edge pixel, or with ``slope`` is extrapolated linearly in inverse
+depth along the growth direction from the two source pixels at the edge (planes
 stay nearly planar: 1 / depth is affine along an image line under a pinhole; on the sphere locally),
 clamped to within a factor 1.5 of the edge's own depth. Off by default: on an estimated depth map
 the two pixels at an edge are rarely the far surface's own (a ramp, noise), and their slope throws

@@ -54,7 +54,7 @@ def keep_opening_bars(
     out = d.copy()
     found = {"openings": 0, "bar_pixels": 0}
     n, labels, boxes, _ = cv2.connectedComponentsWithStats(sky.astype(np.uint8), connectivity=8)
-    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
+    dirs = None  # [H, W, 3] unit directions, made when the first bars are found
     pad = ring_px + 2
     for i in range(1, n):
         x, y, w, h, area = (int(v) for v in boxes[i])
@@ -62,23 +62,25 @@ def keep_opening_bars(
             continue
         y0, y1, x0, x1 = max(0, y - pad), min(H, y + h + pad), max(0, x - pad), min(W, x + w + pad)
         comp = labels[y0:y1, x0:x1] == i
-        resid, sigma = _sky_fit(col[y0:y1, x0:x1], comp)
         found["openings"] += 1
-        bars = _bar_pixels(comp, resid, sigma, colour_tol)
-        plane = None
-        if bars.any():
-            ring = _dilate(comp, ring_px) & ~_dilate(comp, 1) & ~sky[y0:y1, x0:x1]
-            u = dirs[y0:y1, x0:x1]
-            ring_d = d[y0:y1, x0:x1][ring]
-            plane = _robust_plane(u[ring] * ring_d[:, None]) if ring.sum() >= 12 else None
-        if plane is not None:
-            normal, offset = plane
-            cos = u[bars] @ normal  # [B]
-            t = np.where(np.abs(cos) > 1e-6, offset / np.where(np.abs(cos) > 1e-6, cos, 1.0), np.inf)
-            t = np.where(t > 0, t, np.inf)
-            t = np.clip(t, ring_d.min() / 1.5, ring_d.max() * 1.5)  # a plane seen edge-on throws no bar away
-            out[y0:y1, x0:x1][bars] = t
-            found["bar_pixels"] += int(bars.sum())
+        bars = _bar_pixels(comp, *_sky_fit(col[y0:y1, x0:x1], comp), colour_tol)
+        if not bars.any():
+            continue
+        ring = _dilate(comp, ring_px) & ~_dilate(comp, 1) & ~sky[y0:y1, x0:x1]
+        if ring.sum() < 12:
+            continue
+        if dirs is None:
+            dirs = equirect_directions(H, W, dtype=torch.float64).numpy()
+        u, ring_d = dirs[y0:y1, x0:x1], d[y0:y1, x0:x1][ring]
+        plane = _robust_plane(u[ring] * ring_d[:, None])
+        if plane is None:
+            continue
+        normal, offset = plane  # offset > 0: a ray meets the plane at offset / cos, in front when cos > 0
+        with np.errstate(divide="ignore"):
+            t = offset / (u[bars] @ normal)  # [B] metres
+        t = np.clip(np.where(t > 0, t, np.inf), ring_d.min() / 1.5, ring_d.max() * 1.5)  # edge-on: no bar lost
+        out[y0:y1, x0:x1][bars] = t
+        found["bar_pixels"] += int(bars.sum())
     return torch.from_numpy(out).to(depth.dtype).to(depth.device), found
 
 
