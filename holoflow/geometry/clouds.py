@@ -20,7 +20,9 @@ on its equirect grid:
    silhouette's own far side, and where a farther surface reaches under it, that one too; where the
    panorama shows sky, a sky dome behind everything (``sky_dome``): one coarse point per direction that
    is not sky, just beyond the shell, coloured by the sky around it (``fill_from``), so that an eye
-   off the centre looking out of a window past its frame sees sky, never the void;
+   off the centre looking out of a window past its frame sees sky, never the void; before the dome,
+   the side of a window's recess and the frame that the wall's edge hides from the centre
+   (``opening_reveals``, holoflow/geometry/openings.py), so that such an eye sees them, not the sky;
 6. sampled by area (``pf_sampling``; polar caps sampled finer where the panorama's poles hold detail:
    holoflow/geometry/area.py).
 
@@ -39,7 +41,7 @@ from holoflow.geometry.area import called_for, equirect_to_area_points, polar_ca
 from holoflow.geometry.config import PointCloudParams
 from holoflow.geometry.edges import snap_depth_edges
 from holoflow.geometry.layers import background_layer
-from holoflow.geometry.openings import keep_opening_bars
+from holoflow.geometry.openings import keep_opening_bars, opening_reveals
 from holoflow.geometry.pointcloud import (
     depth_gradient_mask,
     equirect_to_points,
@@ -108,6 +110,8 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         pf["polar_caps"] = extra["caps"].to_json()
     if counts.get("pf_layer"):  # the last points of pf.ply, on every layer_stride-th row and column
         pf["layer"] = {"points": counts["pf_layer"], "spacing_rad": 2 * math.pi * cfg.layer_stride / pf_width}
+    if counts.get("pf_reveal"):  # after the layer: the openings' reveals, at P_f's own spacing
+        pf["reveal"] = {"points": counts["pf_reveal"], "spacing_rad": 2 * math.pi / pf_width}
     if counts.get("pf_dome"):  # after the layer: the sky dome's points
         pf["dome"] = {"points": counts["pf_dome"], "spacing_rad": 2 * math.pi / extra["dome_width"]}
     meta = dict(
@@ -130,6 +134,7 @@ def _pf_cloud(
     """P_f from its grid col [h, w, 3] (sRGB) and d [h, w] (radial m, the sky [h, w] on its shell of
     radius ``shell``), steps 2-6 of the module docstring: (the cloud, {"counts", "caps", "polar_detail",
     "dome_width"})."""
+    d_open = torch.where(sky, torch.full_like(d, math.inf), d)  # the openings' sky, for their reveals
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
     d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise)
     normals = surface_normals(d, cfg.layer_tol)  # [h, w, 3]
@@ -163,6 +168,15 @@ def _pf_cloud(
         ldirs = equirect_directions(*ld.shape, dtype=lxyz.dtype)[torch.isfinite(ld) & (ld > 0)]
         xyz, c, n = torch.cat([xyz, lxyz]), torch.cat([c, lc]), torch.cat([n, -ldirs.to(n.dtype)])
         counts["pf_layer"] = counts.get("pf_layer", 0) + int(len(lxyz))
+    if cfg.opening_reveals:  # the recesses' sides that the near jamb hides from the centre
+        rxyz, rc, _ = opening_reveals(col, d_open, 2 * math.pi / col.shape[1])
+        rdirs = rxyz / torch.linalg.vector_norm(rxyz, dim=-1, keepdim=True).clamp_min(1e-12)
+        xyz, c, n = (
+            torch.cat([xyz, rxyz.to(xyz.dtype)]),
+            torch.cat([c, rc.to(c.dtype)]),
+            torch.cat([n, -rdirs.to(n.dtype)]),
+        )
+        counts["pf_reveal"] = int(len(rxyz))
     dome_width = max(8, col.shape[1] // cfg.sky_dome_coarse)
     if cfg.sky_dome and bool(sky.any()):
         dxyz, dc = sky_dome(col, sky, shell * 1.05, dome_width)

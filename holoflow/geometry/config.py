@@ -125,6 +125,12 @@ class PointCloudParams(StageParams):
         "plane instead of the far shell (holoflow/geometry/openings.py); a network blurs them into the "
         "sky, and P_f's grid drops bars thinner than its pixels",
     )
+    opening_reveals: bool = param(
+        True,
+        "P_f: the side of a window's recess and the frame that the wall's edge hides from the centre get "
+        "points (holoflow/geometry/openings.py); without them a step sideways shows the sky dome through "
+        "the wall",
+    )
     opening_colour_tol: float = param(
         0.06, "opening_bars: how far (sRGB distance) from the sky's fitted colour a pixel is a bar", gt=0
     )

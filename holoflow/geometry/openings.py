@@ -1,4 +1,4 @@
-"""Window bars kept in their window: sky seen through an opening of the room, with what crosses it.
+"""Windows kept whole: the bars across an opening of the room, and the recess its wall hides.
 
 A depth network blurs a window's bars into the sky behind them, and a depth map point-sampled to P_f's
 grid drops bars thinner than its pixels: either way the bars' pixels come out as sky, so their colour
@@ -18,6 +18,9 @@ by finite depth: not touching a pole row, at most ``max_fraction`` of the panora
    with the one-pixel rim of mixed colour around it (on the sky it would draw ghost bars);
 4. gives every bar pixel the depth where its ray meets the frame's plane (within 1.5 x the ring's
    depth range) and takes it out of the sky.
+
+``opening_reveals`` then adds the points a recessed window hides from the centre: the side of its recess
+behind the wall's edge and the frame behind that edge, so that a step sideways sees them, not the sky.
 
 Pure functions on an equirect grid: colour [H, W, 3] sRGB in [0, 1], radial depth [H, W] in metres with
 non-finite = sky, pixel centres at +0.5 (docs/conventions.md).
@@ -84,6 +87,130 @@ def keep_opening_bars(
     return torch.from_numpy(out).to(depth.dtype).to(depth.device), found
 
 
+def opening_reveals(
+    srgb: torch.Tensor,
+    depth: torch.Tensor,
+    spacing_rad: float,
+    ring_px: int = 3,
+    max_fraction: float = 0.05,
+    max_depth: float = 0.6,
+    bar_px: int = 3,
+    frame_px: int = 16,
+) -> tuple[torch.Tensor, torch.Tensor, dict]:
+    """Points where a window's recess hides from the centre: the side the wall's edge hides, and the
+    strip of the window behind that edge. A window sits back from its wall; from the centre one side of
+    the recess faces the eye and the other lies behind the wall's edge, so one step sideways shows it,
+    and without points there the sky dome shows through the wall. For every opening (a sky region
+    enclosed by the room, at most ``max_fraction`` of the panorama; its panes closed over bars up to
+    2 ``bar_px`` + 1 wide into one window) this
+
+    1. takes the window's plane: a plane fitted to its bars when it has them, else the back-most plane
+       of the finite pixels ``ring_px`` around it (``_window_plane``);
+    2. measures how far each of those pixels stands in front of that plane; the recess's depth D is
+       the 90th percentile of those between 2 cm (or 1 % of their distance) and ``max_depth`` metres
+       (the wall around the window), and the pixels that touch the sky within a quarter of D are the
+       wall's edge on the hidden side (the visible side's recess meets the window's frame, well under D);
+    3. sweeps each such edge pixel straight back to the window's plane along its normal (the hidden
+       side), then along the plane away from the edge, as far as the frame is wide where the centre sees
+       it (``_frame_width``, at most ``frame_px`` pixels): the frame the edge hides;
+    4. spaces the points ``spacing_rad`` x the edge's distance apart (P_f's spacing) and colours them
+       with the median colour of the recess's sides the centre sees (else of the wall's edge).
+
+    srgb [H, W, 3] sRGB in [0, 1], depth [H, W] radial metres (non-finite = sky), after
+    ``keep_opening_bars``. Returns (points [R, 3] metres, colours [R, 3] sRGB, {"reveals": windows
+    that got points, "reveal_points": R}). Every point lies behind what the centre saw."""
+    import cv2
+
+    from holoflow.geometry.sphere import equirect_directions
+
+    H, W = depth.shape
+    d = depth.detach().cpu().double().numpy()
+    col = srgb.detach().cpu().double().numpy()
+    sky = ~(np.isfinite(d) & (d > 0))
+    found = {"reveals": 0, "reveal_points": 0}
+    points, colours = [np.zeros((0, 3))], [np.zeros((0, 3))]
+    # a window's panes are one opening: close the sky over its bars (up to 2 bar_px + 1 wide)
+    closed = cv2.morphologyEx(sky.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((2 * bar_px + 1,) * 2, np.uint8))
+    n, labels, boxes, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
+    dirs = None
+    pad = ring_px + 2
+    for i in range(1, n):
+        x, y, w, h, area = (int(v) for v in boxes[i])
+        if area < 16 or area > max_fraction * H * W or y == 0 or y + h == H:
+            continue
+        y0, y1, x0, x1 = max(0, y - pad), min(H, y + h + pad), max(0, x - pad), min(W, x + w + pad)
+        solid = ~sky[y0:y1, x0:x1]
+        window = labels[y0:y1, x0:x1] == i
+        comp, bars = window & ~solid, window & solid  # the window's sky, and its bars
+        ring = _dilate(window, ring_px) & solid  # its bars and frame
+        if ring.sum() < 12:
+            continue
+        if dirs is None:
+            dirs = equirect_directions(H, W, dtype=torch.float64).numpy()
+        u, dd = dirs[y0:y1, x0:x1], np.where(solid, d[y0:y1, x0:x1], 0.0)
+        xyz = u * dd[..., None]  # [h, w, 3]
+        # the window's plane: its bars when it has them (its frame ring holds the bay's sides too)
+        plane = _robust_plane(xyz[bars]) if bars.sum() >= 4 * ring_px * ring_px else _window_plane(xyz[ring])
+        if plane is None:
+            continue
+        normal, offset = plane
+        front = offset - xyz @ normal  # [h, w] metres in front of the window's plane
+        edge = _dilate(comp, 1) & solid
+        recessed = ring & (front > np.maximum(0.02, 0.01 * dd)) & (front < max_depth)  # the wall and the recess
+        if recessed.sum() < 8:
+            continue
+        depth_w = float(np.quantile(front[recessed], 0.9))  # the recess's depth: where its wall stands
+        jamb = edge & recessed & (np.abs(front - depth_w) < 0.25 * depth_w)  # the wall's edge at the sky
+        face = recessed & ~edge & (front < 0.75 * depth_w)  # the recess's sides seen beyond the sky's rim
+        if face.sum() < 4:  # none seen: the wall's own edge
+            face = recessed & ~edge
+        if jamb.sum() < 8 or face.sum() < 4:
+            continue
+        edge_xyz, ray = xyz[jamb], u[jamb]  # [J, 3]
+        back = edge_xyz + front[jamb][:, None] * normal  # [J, 3] where the reveal meets the window's plane
+        behind = ray * (offset / np.maximum(ray @ normal, 1e-6))[:, None]  # [J, 3] the plane behind the edge
+        behind = back + _clip_length(behind - back, _frame_width(window, solid, front, dd, spacing_rad, frame_px))
+        step = spacing_rad * dd[jamb]  # [J] metres between points: P_f's own spacing at the edge
+        for a, b in ((edge_xyz, back), (back, behind)):  # the reveal, then the window's plane it hides
+            new = _segments(a, b, step)
+            points.append(new)
+            colours.append(np.broadcast_to(np.median(col[y0:y1, x0:x1][face], 0), (len(new), 3)))
+            found["reveal_points"] += len(new)
+        found["reveals"] += 1
+    xyz_all, rgb_all = np.concatenate(points), np.concatenate(colours)
+    return torch.from_numpy(xyz_all), torch.from_numpy(rgb_all).to(srgb.dtype), found
+
+
+def _frame_width(
+    window: np.ndarray, solid: np.ndarray, front: np.ndarray, dd: np.ndarray, spacing_rad: float, most_px: int
+) -> float:
+    """How wide (metres) a window's frame is where the centre sees it: the pixels in the window's plane
+    (within 2 cm or 1 %) up to ``most_px`` outside its closed mask window [h, w], per pixel of the
+    window's border that lies in that plane (solid [h, w], front [h, w] metres before the plane, dd [h, w]
+    radial metres)."""
+    on_plane = solid & (np.abs(front) < np.maximum(0.02, 0.01 * dd))
+    frame = on_plane & _dilate(window, most_px) & ~window
+    border = on_plane & _dilate(window, 1) & ~window
+    if border.sum() == 0 or frame.sum() == 0:
+        return 0.0
+    return float(frame.sum() / border.sum() * spacing_rad * np.median(dd[frame]))
+
+
+def _clip_length(v: np.ndarray, most: float) -> np.ndarray:
+    """Vectors v [N, 3] shortened to at most ``most`` long."""
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return v * np.minimum(1.0, most / np.maximum(n, 1e-12))
+
+
+def _segments(a: np.ndarray, b: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """Points [R, 3] along the segments from a [N, 3] to b [N, 3], ``step`` [N] metres apart (a itself
+    left out, b in)."""
+    steps = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(int))  # [N]
+    k = np.concatenate([np.arange(1, s + 1) / s for s in steps])  # [R] fractions of the way
+    j = np.repeat(np.arange(len(a)), steps)
+    return a[j] + k[:, None] * (b[j] - a[j])
+
+
 def _dilate(mask: np.ndarray, r: int) -> np.ndarray:
     """mask [h, w] bool grown by r px (square)."""
     import cv2
@@ -131,6 +258,46 @@ def _bar_pixels(comp: np.ndarray, resid: np.ndarray, sigma: float, colour_tol: f
     touching = np.intersect1d(labels[odd & comp & ~inner], labels[odd & inner])
     bars = np.isin(labels, touching[touching > 0]) & odd
     return _dilate(bars, 1) & comp  # a bar's rim of mixed pixels goes with the bar, not onto the sky
+
+
+def _window_plane(points: np.ndarray, tries: int = 256, seed: int = 0) -> tuple[np.ndarray, float] | None:
+    """The plane of a window from the points [R, 3] around it (metres): the back-most plane that many of
+    them lie on. The frame around an opening also holds the wall's edge and the recess's sides, all in
+    front of the window; nothing of the room lies behind it. Among ``tries`` planes through three of
+    the points (seeded), the one with the most points within 1 % of their distance (at least 1 cm) less
+    twice those behind it by more than three times that wins, and ``_robust_plane`` refits its points;
+    None unless a tenth of the points lie on it and at most one in twenty behind it."""
+    r = np.linalg.norm(points, axis=1)
+    points = points[r < 1.5 * np.median(r)]  # not the sky a network's blur pulled into the frame
+    if len(points) < 3:
+        return None
+    rng = np.random.default_rng(seed)
+    tol = np.maximum(0.01 * np.linalg.norm(points, axis=1), 0.01)  # [R]
+    look = points.mean(0) / max(float(np.linalg.norm(points.mean(0))), 1e-12)  # towards the window
+    median = float(np.median(np.linalg.norm(points, axis=1)))
+    best, best_score = None, -np.inf
+    for _ in range(tries):
+        a, b, c = points[rng.choice(len(points), 3, replace=False)]
+        normal = np.cross(b - a, c - a)
+        if np.linalg.norm(normal) < 1e-12:
+            continue
+        normal /= np.linalg.norm(normal)
+        offset = float(normal @ a)
+        if offset < 0:
+            normal, offset = -normal, -offset
+        if normal @ look < 0.3 or offset / (normal @ look) < 0.9 * median:  # edge-on, or before its frame
+            continue
+        front = offset - points @ normal  # [R] metres before the plane (the centre's side)
+        score = int((np.abs(front) < tol).sum()) - 2 * int((front < -3 * tol).sum())
+        if score > best_score:
+            best, best_score = (normal, offset), score
+    if best is None:
+        return None
+    front = best[1] - points @ best[0]
+    if (np.abs(front) < tol).mean() < 0.1 or (front < -3 * tol).mean() > 0.05:
+        return None  # no plane that enough of them lie on with the rest in front: not a window's
+    plane = _robust_plane(points[np.abs(front) < 3 * tol])
+    return plane if plane is not None and plane[0] @ look >= 0.3 else None
 
 
 def _robust_plane(points: np.ndarray) -> tuple[np.ndarray, float] | None:

@@ -81,7 +81,7 @@ def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
         return None
     pf = json.loads(path.read_text())
     caps = PolarCaps(**pf["polar_caps"]) if "polar_caps" in pf else None
-    tails = [pf[k] for k in ("layer", "dome") if k in pf]  # sparser grids after P_f's own points, in order
+    tails = [pf[k] for k in ("layer", "reveal", "dome") if k in pf]  # sparser grids after P_f's own points, in order
     tail_points = sum(int(t["points"]) for t in tails)
     tail_spacing = (
         torch.cat([torch.full((int(t["points"]),), float(t["spacing_rad"]), dtype=torch.float64) for t in tails])

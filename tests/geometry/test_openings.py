@@ -91,3 +91,97 @@ def test_point_clouds_put_the_bars_on_the_wall_only_when_asked():
         return int(inside.sum())
 
     assert near_wall(on.clouds["p0"]) - near_wall(off.clouds["p0"]) >= int(bar.sum())
+
+
+# a window set back in its wall: the wall z = 2 m with a hole 0.3 < x < 1.0, -0.3 < y < 0.4 (+y down), the
+# window's plane z = 2.4 m behind it, a cross of bars there; the recess's side x = 0.3 faces away from
+# the centre (hidden by the wall's edge), the other three sides face it
+RW, RH = 384, 192
+HOLE = (0.3, 1.0, -0.3, 0.4)
+WALL, PANE = 2.0, 2.4
+WALL_GREY, REVEAL_GREY, BAR_GREY = 0.3, 0.55, 0.8
+
+
+def _recessed_window():
+    """Ray cast of the recessed window from the centre: srgb [RH, RW, 3], radial depth [RH, RW] (sky inf;
+    elsewhere a 3 m sphere)."""
+    u = equirect_directions(RH, RW, dtype=torch.float64)  # [RH, RW, 3]
+    x0, x1, y0, y1 = HOLE
+    depth = torch.full((RH, RW), 3.0, dtype=torch.float64)
+    rgb = torch.full((RH, RW, 3), WALL_GREY, dtype=torch.float64)
+    ahead = u[..., 2] > 0.2
+    t_wall = WALL / u[..., 2].clamp_min(1e-6)
+    p = u * t_wall[..., None]
+    in_hole = ahead & (p[..., 0] > x0) & (p[..., 0] < x1) & (p[..., 1] > y0) & (p[..., 1] < y1)
+    depth[ahead & ~in_hole] = t_wall[ahead & ~in_hole]
+    t_pane = PANE / u[..., 2].clamp_min(1e-6)
+    q = u * t_pane[..., None]
+    through = in_hole & (q[..., 0] > x0) & (q[..., 0] < x1) & (q[..., 1] > y0) & (q[..., 1] < y1)
+    bar = through & (((q[..., 0] - 0.65).abs() < 0.02) | ((q[..., 1] - 0.05).abs() < 0.02))
+    depth[through] = float("inf")
+    depth[bar] = t_pane[bar]
+    rgb[through] = torch.tensor([0.7, 0.8, 0.95], dtype=torch.float64)
+    rgb[bar] = BAR_GREY
+    side = in_hole & ~through  # the ray meets a side of the recess
+    t_side = torch.full((RH, RW), float("inf"), dtype=torch.float64)
+    for axis, value in ((0, x0), (0, x1), (1, y0), (1, y1)):
+        t = value / torch.where(u[..., axis].abs() > 1e-9, u[..., axis], torch.full_like(t_side, 1e-9))
+        z = u[..., 2] * t
+        t_side = torch.where((t > 0) & (z >= WALL - 1e-9) & (z <= PANE + 1e-9), torch.minimum(t_side, t), t_side)
+    depth[side] = t_side[side]
+    rgb[side] = REVEAL_GREY
+    return rgb, depth
+
+
+def test_the_recess_side_the_wall_hides_gets_points_and_nothing_else_does():
+    from holoflow.geometry.openings import opening_reveals
+
+    rgb, depth = _recessed_window()
+    spacing = 2 * torch.pi / RW
+    xyz, colour, found = opening_reveals(rgb, depth, spacing)
+    assert found["reveals"] == 1 and found["reveal_points"] == len(xyz) > 50
+    x0, x1, y0, y1 = HOLE
+    tol = 2 * spacing * PANE  # two of P_f's steps at the window
+    on_side = ((xyz[:, 0] - x0).abs() < tol) & (xyz[:, 2] > WALL - tol) & (xyz[:, 2] < PANE + tol)
+    behind_edge = ((xyz[:, 2] - PANE).abs() < tol) & (xyz[:, 0] > x0 - tol) & (xyz[:, 0] < x0 + 0.25)
+    assert bool((on_side | behind_edge).all())  # only on the hidden side and the window's plane behind it
+    assert bool(((xyz[:, 1] > y0 - tol) & (xyz[:, 1] < y1 + tol)).all())
+    # the hidden side is covered: every point of it has a reveal point within two steps
+    ys, zs = torch.meshgrid(
+        torch.linspace(y0 + 0.05, y1 - 0.05, 12), torch.linspace(WALL + 0.05, PANE - 0.05, 6), indexing="ij"
+    )
+    side = torch.stack([torch.full_like(ys, x0), ys, zs], -1).reshape(-1, 3).double()
+    assert float(torch.cdist(side, xyz).min(1).values.max()) < tol
+    assert torch.allclose(colour, torch.full_like(colour, REVEAL_GREY), atol=0.02)  # the recess's own colour
+    # none of them is in front of what the centre saw
+    r = torch.linalg.vector_norm(xyz, dim=-1)
+    from holoflow.geometry.sampling import sample_equirect
+
+    seen = sample_equirect(depth[None], xyz / r[:, None], "nearest")[0]
+    assert bool((r >= seen * (1 - 1e-6)).all())
+
+
+def test_a_window_flush_with_its_wall_and_an_open_sky_get_no_reveals():
+    from holoflow.geometry.openings import opening_reveals
+
+    rgb, depth, _, _ = _wall_with_window()
+    _, _, found = opening_reveals(rgb, depth, 2 * torch.pi / W)
+    assert found == {"reveals": 0, "reveal_points": 0}
+    rgb, depth = _recessed_window()
+    depth[:95, 195:225] = float("inf")  # the window's sky reaches the zenith: outdoors, not an opening
+    xyz, _, found = opening_reveals(rgb, depth, 2 * torch.pi / RW)
+    assert found["reveals"] == 0 and len(xyz) == 0
+
+
+def test_point_clouds_add_the_reveals_to_p_f_only_when_asked():
+    from holoflow.imageops.color import srgb_to_linear_torch
+
+    rgb, depth = _recessed_window()
+    linear = srgb_to_linear_torch(rgb.float())
+    cfg = dict(p0_width=RW, pf_width=RW, ps_width=RW // 2, pf_polar_density=1.0, pf_sampling="grid")
+    on = point_clouds(linear, depth, PointCloudParams(**cfg))
+    off = point_clouds(linear, depth, PointCloudParams(**cfg, opening_reveals=False))
+    n = on.meta["points"]["pf_reveal"]
+    assert n > 50 and on.pf["reveal"]["points"] == n and "reveal" not in off.pf
+    assert len(on.clouds["pf"].xyz) == len(off.clouds["pf"].xyz) + n
+    assert len(on.clouds["p0"].xyz) == len(off.clouds["p0"].xyz)  # P_f's alone
