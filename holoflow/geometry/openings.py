@@ -46,7 +46,6 @@ def keep_opening_bars(
     """The module docstring's steps on srgb [H, W, 3] and radial depth [H, W] (metres, non-finite = sky):
     (the depth with every bar pixel at its frame's plane [H, W], {"openings": how many sky regions were
     openings, "bar_pixels": how many pixels left the sky})."""
-    import cv2
 
     from holoflow.geometry.sphere import equirect_directions
 
@@ -56,15 +55,8 @@ def keep_opening_bars(
     sky = ~(np.isfinite(d) & (d > 0))
     out = d.copy()
     found = {"openings": 0, "bar_pixels": 0}
-    n, labels, boxes, _ = cv2.connectedComponentsWithStats(sky.astype(np.uint8), connectivity=8)
     dirs = None  # [H, W, 3] unit directions, made when the first bars are found
-    pad = ring_px + 2
-    for i in range(1, n):
-        x, y, w, h, area = (int(v) for v in boxes[i])
-        if area < 16 or area > max_fraction * H * W or y == 0 or y + h == H:
-            continue
-        y0, y1, x0, x1 = max(0, y - pad), min(H, y + h + pad), max(0, x - pad), min(W, x + w + pad)
-        comp = labels[y0:y1, x0:x1] == i
+    for (y0, y1, x0, x1), comp in _openings(sky, max_fraction, ring_px + 2):
         found["openings"] += 1
         bars = _bar_pixels(comp, *_sky_fit(col[y0:y1, x0:x1], comp), colour_tol)
         if not bars.any():
@@ -131,16 +123,9 @@ def opening_reveals(
     points, colours = [np.zeros((0, 3))], [np.zeros((0, 3))]
     # a window's panes are one opening: close the sky over its bars (up to 2 bar_px + 1 wide)
     closed = cv2.morphologyEx(sky.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((2 * bar_px + 1,) * 2, np.uint8))
-    n, labels, boxes, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
     dirs = None
-    pad = ring_px + 2
-    for i in range(1, n):
-        x, y, w, h, area = (int(v) for v in boxes[i])
-        if area < 16 or area > max_fraction * H * W or y == 0 or y + h == H:
-            continue
-        y0, y1, x0, x1 = max(0, y - pad), min(H, y + h + pad), max(0, x - pad), min(W, x + w + pad)
+    for (y0, y1, x0, x1), window in _openings(closed.astype(bool), max_fraction, ring_px + 2):
         solid = ~sky[y0:y1, x0:x1]
-        window = labels[y0:y1, x0:x1] == i
         comp, bars = window & ~solid, window & solid  # the window's sky, and its bars
         ring = _dilate(window, ring_px) & solid  # its bars and frame
         if ring.sum() < 12:
@@ -179,6 +164,22 @@ def opening_reveals(
         found["reveals"] += 1
     xyz_all, rgb_all = np.concatenate(points), np.concatenate(colours)
     return torch.from_numpy(xyz_all), torch.from_numpy(rgb_all).to(srgb.dtype), found
+
+
+def _openings(sky: np.ndarray, max_fraction: float, pad: int):
+    """The openings of a sky mask [H, W]: its 8-connected regions of 16 px or more, at most
+    ``max_fraction`` of the panorama, touching neither pole row. Yields ((y0, y1, x0, x1) the region's
+    box grown by ``pad`` px within the panorama, the region's mask [y1 - y0, x1 - x0] in that box)."""
+    import cv2
+
+    H, W = sky.shape
+    n, labels, boxes, _ = cv2.connectedComponentsWithStats(sky.astype(np.uint8), connectivity=8)
+    for i in range(1, n):
+        x, y, w, h, area = (int(v) for v in boxes[i])
+        if area < 16 or area > max_fraction * H * W or y == 0 or y + h == H:
+            continue
+        y0, y1, x0, x1 = max(0, y - pad), min(H, y + h + pad), max(0, x - pad), min(W, x + w + pad)
+        yield (y0, y1, x0, x1), labels[y0:y1, x0:x1] == i
 
 
 def _frame_width(
