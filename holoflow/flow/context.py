@@ -159,7 +159,8 @@ def cuda_present() -> bool:
 
 
 def select(pipe: Pipeline, opts: Options, uses: dict[str, Path]) -> tuple[set[str], set[str], set[str]]:
-    """(selected: may run, needed: must be available, forced) from --from/--until/--only/--force/--use."""
+    """(selected: may run, needed: must be available, forced) from --from/--until/--only/--force/--use.
+    A stage whose outputs only --use'd stages read is neither: nothing in the run needs it."""
     for flag, name in (
         ("--from", opts.from_stage),
         ("--until", opts.until),
@@ -182,8 +183,13 @@ def select(pipe: Pipeline, opts: Options, uses: dict[str, Path]) -> tuple[set[st
             f"covers ({', '.join(s for s in pipe.stages if s in selected)}); fix: widen "
             f"--from/--until/--only"
         )
+    # what the run is for: its last selected stages and the ones named on the command line; a stage
+    # only --use'd stages read (tangent_depth under --use metric_align=...) has nothing to do
+    named = {n for n in (opts.from_stage, opts.until, opts.only, *opts.force) if n and n != "all"}
+    read = {up for n in selected for up in pipe.stages[n].inputs.values()}
+    targets = {n for n in selected if n not in read} | (named & selected) | forced
     needed: set[str] = set()
-    stack = list(selected)
+    stack = list(targets)
     while stack:
         n = stack.pop()
         if n in needed:
@@ -191,7 +197,7 @@ def select(pipe: Pipeline, opts: Options, uses: dict[str, Path]) -> tuple[set[st
         needed.add(n)
         if n not in uses:
             stack.extend(pipe.stages[n].inputs.values())
-    return selected, needed, forced
+    return selected & needed, needed, forced
 
 
 # -- running -------------------------------------------------------------------------------------

@@ -83,3 +83,25 @@ def test_reasons_in_words():
         "seed changed: 0 -> 1",
         'prompt changed: "cabin" -> "temple"',
     ]
+
+
+def test_a_stage_only_used_stages_read_is_not_run():
+    """`--use metric_align=...`: tangent_depth, which only metric_align reads, has nothing to do; a stage
+    named on the command line, or another reader of it, still brings it in."""
+    from holoflow.flow.context import Options, select
+
+    p = pipeline.load(ROOT / "pipeline.yaml")
+    used = {"base_pano": Path("pano.exr"), "metric_align": Path("depth.exr")}
+    selected, needed, _ = select(p, Options(), used)
+    assert "tangent_depth" not in selected | needed
+    assert {"base_pano", "metric_align", "point_cloud", "export"} <= needed and "metric_align" in selected
+    assert selected == set(p.stages) - {"tangent_depth"}
+    selected, needed, _ = select(p, Options(force=["tangent_depth"]), used)
+    assert "tangent_depth" in selected & needed  # asked for by name
+    selected, needed, _ = select(p, Options(until="tangent_depth"), used)
+    assert "tangent_depth" in selected & needed
+    selected, needed, _ = select(p, Options(), {"base_pano": Path("pano.exr")})
+    assert selected == needed == set(p.stages)  # nothing used downstream: every stage runs
+    # the fixture's join reads gen besides upper: --use upper keeps gen
+    f = pipeline.load(FIXTURES / "pipeline.yaml")
+    assert select(f, Options(), {"upper": Path("u.txt")})[0] == {"gen", "upper", "join"}
