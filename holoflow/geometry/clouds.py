@@ -112,7 +112,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         pf["layer"] = {"points": counts["pf_layer"], "spacing_rad": 2 * math.pi * cfg.layer_stride / pf_width}
     if counts.get("pf_reveal"):  # after the layer: the openings' reveals, at P_f's own spacing
         pf["reveal"] = {"points": counts["pf_reveal"], "spacing_rad": 2 * math.pi / pf_width}
-    if counts.get("pf_dome"):  # after the layer: the sky dome's points
+    if counts.get("pf_dome"):  # last: the sky dome's points
         pf["dome"] = {"points": counts["pf_dome"], "spacing_rad": 2 * math.pi / extra["dome_width"]}
     meta = dict(
         pf_width=pf_width,
@@ -166,22 +166,17 @@ def _pf_cloud(
     for ld, lcol in layers:  # the layer continues a far surface seen head on from the centre: discs face it
         lxyz, lc = equirect_to_points(lcol, ld)
         ldirs = equirect_directions(*ld.shape, dtype=lxyz.dtype)[torch.isfinite(ld) & (ld > 0)]
-        xyz, c, n = torch.cat([xyz, lxyz]), torch.cat([c, lc]), torch.cat([n, -ldirs.to(n.dtype)])
+        xyz, c, n = _append((xyz, c, n), (lxyz, lc, -ldirs))
         counts["pf_layer"] = counts.get("pf_layer", 0) + int(len(lxyz))
     if cfg.opening_reveals:  # the recesses' sides that the near jamb hides from the centre
         rxyz, rc, _ = opening_reveals(col, d_open, 2 * math.pi / col.shape[1])
         rdirs = rxyz / torch.linalg.vector_norm(rxyz, dim=-1, keepdim=True).clamp_min(1e-12)
-        xyz, c, n = (
-            torch.cat([xyz, rxyz.to(xyz.dtype)]),
-            torch.cat([c, rc.to(c.dtype)]),
-            torch.cat([n, -rdirs.to(n.dtype)]),
-        )
+        xyz, c, n = _append((xyz, c, n), (rxyz, rc, -rdirs))  # discs facing the centre, as the layer's
         counts["pf_reveal"] = int(len(rxyz))
     dome_width = max(8, col.shape[1] // cfg.sky_dome_coarse)
     if cfg.sky_dome and bool(sky.any()):
         dxyz, dc = sky_dome(col, sky, shell * 1.05, dome_width)
-        n = torch.cat([n, -dxyz / torch.linalg.vector_norm(dxyz, dim=-1, keepdim=True)])
-        xyz, c = torch.cat([xyz, dxyz.to(xyz.dtype)]), torch.cat([c, dc.to(c.dtype)])
+        xyz, c, n = _append((xyz, c, n), (dxyz, dc, -dxyz / torch.linalg.vector_norm(dxyz, dim=-1, keepdim=True)))
         counts["pf_dome"] = int(len(dxyz))
     return Cloud(xyz, _to_u8(c), n), {"counts": counts, "caps": caps, "polar_detail": detail, "dome_width": dome_width}
 
@@ -226,6 +221,11 @@ def fill_from(values: torch.Tensor, known: torch.Tensor) -> torch.Tensor:
         up = out.repeat_interleave(2, 0).repeat_interleave(2, 1)[: v.shape[0], : v.shape[1]]
         out = torch.where(w > 0, v / w.clamp_min(1e-12), up)
     return out
+
+
+def _append(cloud: tuple, more: tuple) -> tuple:
+    """(xyz, colours, normals) of a cloud with ``more`` such tensors after its own, in its dtypes."""
+    return tuple(torch.cat([a, b.to(a.dtype)]) for a, b in zip(cloud, more))
 
 
 def _sum_2x2(x: torch.Tensor) -> torch.Tensor:

@@ -46,7 +46,6 @@ def keep_opening_bars(
     """The module docstring's steps on srgb [H, W, 3] and radial depth [H, W] (metres, non-finite = sky):
     (the depth with every bar pixel at its frame's plane [H, W], {"openings": how many sky regions were
     openings, "bar_pixels": how many pixels left the sky})."""
-
     from holoflow.geometry.sphere import equirect_directions
 
     H, W = depth.shape
@@ -156,10 +155,11 @@ def opening_reveals(
         behind = ray * (offset / np.maximum(ray @ normal, 1e-6))[:, None]  # [J, 3] the plane behind the edge
         behind = back + _clip_length(behind - back, _frame_width(window, solid, front, dd, spacing_rad, frame_px))
         step = spacing_rad * dd[jamb]  # [J] metres between points: P_f's own spacing at the edge
+        colour = np.median(col[y0:y1, x0:x1][face], 0)  # [3]
         for a, b in ((edge_xyz, back), (back, behind)):  # the reveal, then the window's plane it hides
             new = _segments(a, b, step)
             points.append(new)
-            colours.append(np.broadcast_to(np.median(col[y0:y1, x0:x1][face], 0), (len(new), 3)))
+            colours.append(np.broadcast_to(colour, (len(new), 3)))
             found["reveal_points"] += len(new)
         found["reveals"] += 1
     xyz_all, rgb_all = np.concatenate(points), np.concatenate(colours)
