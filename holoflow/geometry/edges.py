@@ -9,11 +9,14 @@ its own, intermediate depth (holoflow/geometry/layers.py), which the far surface
 ``snap_depth_edges`` runs ``rounds`` times: around each pixel it takes the nearest (lo) and farthest
 (hi) depth of the (2 ``radius`` + 1)^2 window (columns wrap, rows clamp); where hi > lo (1 +
 ``ratio``) the window holds an edge, and a pixel of it that lies more than ``tol`` (relative) from
-both ends is moved to the end nearer in inverse depth (parallax: what an eye move sees). Pixels
-within ``tol`` of an end, and everything away from edges, keep their depth, so a smooth surface
-(whose window spans less than ``ratio``) is never touched. A surface at incidence a spans about
-2 ``radius`` tan(a) x the pixel angle: with radius 3 and ratio 0.25 on a 1536 px wide P_f, only one
-seen beyond 84 deg (2048 px: 85.6 deg) is stepped.
+both ends is moved to the end nearer in inverse depth (parallax: what an eye move sees), unless it
+belongs to a surface of its own: a ramp pixel has few neighbours at its depth (a ramp's level is a
+line along the edge), while a third surface between the two (the side of a window's recess between
+the wall's edge and the sky) fills the window with pixels within ``tol`` / 4 of it, more than two
+lines' worth (2 (2 ``radius`` + 1) + 1). Pixels within ``tol`` of an end, and everything away from
+edges, keep their depth, so a smooth surface (whose window spans less than ``ratio``) is never
+touched. A surface at incidence a spans about 2 ``radius`` tan(a) x the pixel angle: with radius 3
+and ratio 0.25 on a 1536 px wide P_f, only one seen beyond 84 deg (2048 px: 85.6 deg) is stepped.
 
 Conventions: radial depth in metres, finite > 0 (the sky already on its shell; holoflow/geometry/pointcloud.py).
 """
@@ -32,6 +35,19 @@ def _window_min_max(d: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.T
     return -F.max_pool2d(-x, k, 1)[0, 0], F.max_pool2d(x, k, 1)[0, 0]
 
 
+def _level_support(d: torch.Tensor, radius: int, tol: float) -> torch.Tensor:
+    """How many pixels [H, W] of each (2 radius + 1)^2 window of d [H, W] (columns wrapping, rows
+    clamped) lie within ``tol`` (relative) of its centre pixel's depth, the centre included."""
+    x = torch.cat([d[:, -radius:], d, d[:, :radius]], 1)[None, None]  # [1, 1, H, W + 2r]
+    x = F.pad(x, (0, 0, radius, radius), mode="replicate")[0, 0]  # [H + 2r, W + 2r]
+    H, W = d.shape
+    count = torch.zeros(H, W, dtype=torch.int32, device=d.device)
+    for dy in range(2 * radius + 1):
+        for dx in range(2 * radius + 1):
+            count += (torch.abs(x[dy : dy + H, dx : dx + W] - d) <= tol * d).int()
+    return count
+
+
 def snap_depth_edges(
     radial_depth: torch.Tensor, radius: int = 3, ratio: float = 0.25, tol: float = 0.1, rounds: int = 2
 ) -> torch.Tensor:
@@ -45,6 +61,8 @@ def snap_depth_edges(
     for _ in range(rounds):
         lo, hi = _window_min_max(d, radius)
         mid = (hi > lo * (1 + ratio)) & (d > lo * (1 + tol)) & (hi > d * (1 + tol))
+        if bool(mid.any()):  # a surface of its own between the two ends stays
+            mid &= _level_support(d, radius, tol / 4) <= 2 * (2 * radius + 1)
         to_near = (1 / lo - 1 / d) < (1 / d - 1 / hi)
         d = torch.where(mid, torch.where(to_near, lo, hi), d)
     return d

@@ -34,6 +34,28 @@ def test_a_ramp_becomes_a_step_and_its_layer_lies_on_the_far_side():
         assert bool((under >= 1.5).all()) == ok  # the ramp's 1.15 / 1.35 m without
 
 
+def chimney_recess_sky(band: int, recess: float = 2.47) -> torch.Tensor:
+    """grey_white_room, one row 16 times: a chimney breast's edge at 2.0 m, beside it the side of a
+    window's recess at ``recess`` m seen for ``band`` pixels, then the sky on its shell at 7.5 m (P_f
+    at 1536 px)."""
+    row = [2.0] * 12 + [recess + 0.002 * i for i in range(band)] + [7.5] * 12
+    return torch.tensor(row, dtype=torch.float64).expand(16, -1).clone()
+
+
+@pytest.mark.parametrize("band", [3, 6])
+def test_a_surface_between_a_near_edge_and_the_sky_stays(band):
+    d = chimney_recess_sky(band)
+    assert torch.equal(snap_depth_edges(d), d)  # the recess keeps its depth: no pixel of it moves
+
+
+def test_a_ramp_beside_a_surface_between_an_edge_and_the_sky_still_snaps():
+    d = chimney_recess_sky(3, recess=2.6)  # a recess deep enough that the wall's edge is an edge to it
+    d[:, 10:12] = torch.tensor([2.25, 2.3], dtype=torch.float64)  # the wall's edge drawn as a ramp
+    s = snap_depth_edges(d)
+    assert torch.equal(s[:, 12:], d[:, 12:])  # the recess stays
+    assert (s[:, 10] == 2.0).all() and (s[:, 11] >= 2.6).all()  # each ramp pixel went to the end nearer it
+
+
 def test_smooth_surfaces_are_left_alone():
     # walls seen obliquely all round (inverse depth smooth in the column, the seam included) and a
     # floor seen at 80 deg incidence (relative gradient tan 80 deg x the pixel angle)
