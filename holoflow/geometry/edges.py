@@ -27,10 +27,15 @@ import torch
 import torch.nn.functional as F
 
 
+def _padded(d: torch.Tensor, radius: int) -> torch.Tensor:
+    """d [H, W] grown by ``radius`` px on every side, columns wrapping, rows clamped: [H + 2r, W + 2r]."""
+    x = torch.cat([d[:, -radius:], d, d[:, :radius]], 1)[None, None]  # [1, 1, H, W + 2r]
+    return F.pad(x, (0, 0, radius, radius), mode="replicate")[0, 0]
+
+
 def _window_min_max(d: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Min and max [H, W] of d [H, W] over (2 radius + 1)^2 windows, columns wrapping, rows clamped."""
-    x = torch.cat([d[:, -radius:], d, d[:, :radius]], 1)[None, None]  # [1, 1, H, W + 2r]
-    x = F.pad(x, (0, 0, radius, radius), mode="replicate")  # [1, 1, H + 2r, W + 2r]
+    x = _padded(d, radius)[None, None]
     k = 2 * radius + 1
     return -F.max_pool2d(-x, k, 1)[0, 0], F.max_pool2d(x, k, 1)[0, 0]
 
@@ -38,8 +43,7 @@ def _window_min_max(d: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.T
 def _level_support(d: torch.Tensor, radius: int, tol: float) -> torch.Tensor:
     """How many pixels [H, W] of each (2 radius + 1)^2 window of d [H, W] (columns wrapping, rows
     clamped) lie within ``tol`` (relative) of its centre pixel's depth, the centre included."""
-    x = torch.cat([d[:, -radius:], d, d[:, :radius]], 1)[None, None]  # [1, 1, H, W + 2r]
-    x = F.pad(x, (0, 0, radius, radius), mode="replicate")[0, 0]  # [H + 2r, W + 2r]
+    x = _padded(d, radius)  # [H + 2r, W + 2r]
     H, W = d.shape
     count = torch.zeros(H, W, dtype=torch.int32, device=d.device)
     for dy in range(2 * radius + 1):
