@@ -89,6 +89,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         if cfg.opening_bars:
             d, found = keep_opening_bars(col, d, colour_tol=cfg.opening_colour_tol)
             counts[f"{name}_opening_bar_pixels"] = found["bar_pixels"]
+            counts[f"{name}_opening_frame_pixels"] = found["frame_pixels"]
         sky = ~(torch.isfinite(d) & (d > 0))
         d = sky_to_shell(d, shell)
         if name == "pf":

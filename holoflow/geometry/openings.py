@@ -17,7 +17,10 @@ by finite depth: not touching a pole row, at most ``max_fraction`` of the panora
    middle of a pane stays sky, and so does the rim of pixels a frame shares with the sky), together
    with the one-pixel rim of mixed colour around it (on the sky it would draw ghost bars);
 4. gives every bar pixel the depth where its ray meets the frame's plane (within 1.5 x the ring's
-   depth range) and takes it out of the sky.
+   depth range) and takes it out of the sky;
+5. puts onto that plane every finite pixel within 2 ``ring_px`` of the opening that lies behind it:
+   nothing of the room is behind its window, but a network's blur pushes a frame's edge towards the
+   sky (by half its distance, grey_white_room), where a step sideways sees it over the sky.
 
 ``opening_reveals`` then adds the points a recessed window hides from the centre: the side of its recess
 behind the wall's edge and the frame behind that edge, so that a step sideways sees them, not the sky.
@@ -42,10 +45,13 @@ def keep_opening_bars(
     ring_px: int = 3,
     colour_tol: float = 0.06,
     max_fraction: float = 0.05,
+    behind_tol: float = 0.03,
 ) -> tuple[torch.Tensor, dict]:
     """The module docstring's steps on srgb [H, W, 3] and radial depth [H, W] (metres, non-finite = sky):
     (the depth with every bar pixel at its frame's plane [H, W], {"openings": how many sky regions were
-    openings, "bar_pixels": how many pixels left the sky})."""
+    openings, "bar_pixels": how many pixels left the sky, "frame_pixels": how many finite pixels within
+    2 ``ring_px`` of an opening with bars lay more than ``behind_tol`` (relative) behind its plane and
+    went onto it})."""
     from holoflow.geometry.sphere import equirect_directions
 
     H, W = depth.shape
@@ -53,7 +59,7 @@ def keep_opening_bars(
     col = srgb.detach().cpu().double().numpy()
     sky = ~(np.isfinite(d) & (d > 0))
     out = d.copy()
-    found = {"openings": 0, "bar_pixels": 0}
+    found = {"openings": 0, "bar_pixels": 0, "frame_pixels": 0}
     dirs = None  # [H, W, 3] unit directions, made when the first bars are found
     for (y0, y1, x0, x1), comp in _openings(sky, max_fraction, ring_px + 2):
         found["openings"] += 1
@@ -75,6 +81,14 @@ def keep_opening_bars(
         t = np.clip(np.where(t > 0, t, np.inf), ring_d.min() / 1.5, ring_d.max() * 1.5)  # edge-on: no bar lost
         out[y0:y1, x0:x1][bars] = t
         found["bar_pixels"] += int(bars.sum())
+        # nothing of the room lies behind its window: a frame a network blurred past the plane goes onto it
+        near = _dilate(comp, 2 * ring_px) & ~sky[y0:y1, x0:x1]
+        with np.errstate(divide="ignore"):
+            t_near = offset / (u[near] @ normal)  # [F] metres
+        box = out[y0:y1, x0:x1]  # a view of out
+        behind = (t_near > 0) & (box[near] > t_near * (1 + behind_tol))
+        box[near] = np.where(behind, t_near, box[near])
+        found["frame_pixels"] += int(behind.sum())
     return torch.from_numpy(out).to(depth.dtype).to(depth.device), found
 
 

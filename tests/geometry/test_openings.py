@@ -64,10 +64,29 @@ def test_bars_lost_to_the_sky_get_the_frames_plane_and_the_panes_stay_sky(mixed)
     assert torch.equal(out[outside], depth[outside])  # nothing else moves
 
 
+def test_a_frame_blurred_behind_its_window_goes_onto_the_plane_and_nothing_before_it_moves():
+    rgb, depth, bar, panes = _wall_with_window()
+    v, u = torch.meshgrid(torch.arange(H), torch.arange(W), indexing="ij")
+    window = bar | panes
+    edge = (u >= 83) & (u < 109) & (v >= 33) & (v < 59) & ~window  # the frame's pixels beside the sky
+    blurred = edge & (u < 96)  # a network's blur pushed the left half halfway to the sky
+    depth[blurred] *= 1.5
+    before = edge & (u >= 96) & (v < 40)  # a part of the right half stands 0.3 m before the wall
+    depth[before] -= 0.3
+    out, found = keep_opening_bars(rgb, depth)
+    dirs = equirect_directions(H, W, dtype=torch.float64)
+    plane = WALL_Z / dirs[..., 2]
+    assert found["frame_pixels"] == int(blurred.sum())
+    assert torch.allclose(out[blurred], plane[blurred], rtol=0.02)  # back on the window's plane
+    assert torch.equal(out[before], depth[before])  # in front of it: the room, left alone
+    rest = torch.isfinite(depth) & ~blurred
+    assert torch.equal(out[rest], depth[rest])
+
+
 def test_a_window_without_bars_a_cloud_in_a_pane_and_an_open_sky_stay_as_they_are():
     rgb, depth, _, _ = _wall_with_window(bars=False, cloud=True)
     out, found = keep_opening_bars(rgb, depth)
-    assert found == {"openings": 1, "bar_pixels": 0} and torch.equal(out, depth)
+    assert found == {"openings": 1, "bar_pixels": 0, "frame_pixels": 0} and torch.equal(out, depth)
     rgb, depth, _, _ = _wall_with_window()
     depth[:40] = float("inf")  # the sky reaches the zenith: outdoors, not an opening
     out, found = keep_opening_bars(rgb, depth)
