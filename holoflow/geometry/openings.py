@@ -18,7 +18,8 @@ by finite depth: not touching a pole row, at most ``max_fraction`` of the panora
    with the one-pixel rim of mixed colour around it (on the sky it would draw ghost bars);
 4. gives every bar pixel the depth where its ray meets the frame's plane (within 1.5 x the ring's
    depth range) and takes it out of the sky;
-5. puts onto that plane every finite pixel within 2 ``ring_px`` of the opening that lies behind it:
+5. puts onto that plane every finite pixel within 2 ``ring_px`` of the opening (and within its box,
+   ``ring_px`` + 2 px beyond its extent) that lies behind it:
    nothing of the room is behind its window, but a network's blur pushes a frame's edge towards the
    sky (by half its distance, grey_white_room), where a step sideways sees it over the sky.
 
@@ -49,8 +50,8 @@ def keep_opening_bars(
 ) -> tuple[torch.Tensor, dict]:
     """The module docstring's steps on srgb [H, W, 3] and radial depth [H, W] (metres, non-finite = sky):
     (the depth with every bar pixel at its frame's plane [H, W], {"openings": how many sky regions were
-    openings, "bar_pixels": how many pixels left the sky, "frame_pixels": how many finite pixels within
-    2 ``ring_px`` of an opening with bars lay more than ``behind_tol`` (relative) behind its plane and
+    openings, "bar_pixels": how many pixels left the sky, "frame_pixels": how many finite pixels near
+    an opening with bars (step 5) lay more than ``behind_tol`` (relative) behind its plane and
     went onto it})."""
     from holoflow.geometry.sphere import equirect_directions
 
@@ -82,7 +83,7 @@ def keep_opening_bars(
         out[y0:y1, x0:x1][bars] = t
         found["bar_pixels"] += int(bars.sum())
         # nothing of the room lies behind its window: a frame a network blurred past the plane goes onto it
-        near = _dilate(comp, 2 * ring_px) & ~sky[y0:y1, x0:x1]
+        near = _dilate(comp, 2 * ring_px) & ~sky[y0:y1, x0:x1]  # within its box
         with np.errstate(divide="ignore"):
             t_near = offset / (u[near] @ normal)  # [F] metres
         box = out[y0:y1, x0:x1]  # a view of out
