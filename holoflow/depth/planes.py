@@ -32,6 +32,11 @@ MIN_WIDTH = 256
 CURVED = 0.02
 #: the planes must cover this share of the sphere for the scene to be a room (else nothing is changed)
 MIN_ROOM = 0.3
+#: the planes are found on the depth shrunk to at most this width (nearest pixel): a network's per-pixel
+#: noise tilts the normals the more the finer the grid (at 2048 px the simulated network's found none)
+WORK_WIDTH = 1024
+#: spread_log_ratio: inside objects the bias comes from a Gaussian this many times wider
+FILL = 4.0
 #: relative engines whose depth carries a network's blur and low-frequency bias (``refine: auto`` mends it)
 BIASED_ENGINES = ("depth_anything", "simulated")
 
@@ -142,17 +147,27 @@ def plane_depth_ratio(
     return ratio, which
 
 
-def spread_log_ratio(log_ratio: np.ndarray, known: np.ndarray, sigma: float, fade: float = 0.2) -> np.ndarray:
+def spread_log_ratio(
+    log_ratio: np.ndarray, known: np.ndarray, sigma: float, fade: float = 0.2, fill: float = FILL
+) -> np.ndarray:
     """log_ratio [H, W] known on ``known`` [H, W] spread over the panorama by normalized Gaussian
-    convolution (``sigma`` pixels; columns wrap, rows clamp); it fades to 0 (no correction) where the
-    known pixels' local density is below ``fade``."""
+    convolution (``sigma`` pixels; columns wrap, rows clamp). Where the known pixels' local density is
+    below ``fade`` (inside an object, away from any plane) it blends into the same spread at ``fill`` x
+    ``sigma``: a network's bias is smooth across the image, so the planes around an object say what its
+    bias is; only where that wider spread's density is also below ``fade`` does it fade to 0 (no
+    correction)."""
     import scipy.ndimage as ndi
 
     mode = ("nearest", "wrap")
     w = known.astype(np.float64)
-    num = ndi.gaussian_filter(np.where(known, log_ratio, 0.0), sigma, mode=mode)
-    den = ndi.gaussian_filter(w, sigma, mode=mode)
-    return num / np.maximum(den, 1e-12) * np.clip(den / fade, 0.0, 1.0)
+    values = np.where(known, log_ratio, 0.0)
+    out = np.zeros_like(w)
+    for s in (sigma * fill, sigma):  # wide first, then the fine spread wherever it has the density
+        den = ndi.gaussian_filter(w, s, mode=mode)
+        spread = ndi.gaussian_filter(values, s, mode=mode) / np.maximum(den, 1e-12)
+        a = np.clip(den / fade, 0.0, 1.0)
+        out = a * spread + (1 - a) * out
+    return out
 
 
 def contact_offsets(
@@ -278,26 +293,36 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
 
     depth = np.asarray(depth, np.float64)
     H, W = depth.shape
-    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
-    finite = np.isfinite(depth) & (depth > 0)
-    lat = (0.5 - (np.arange(H) + 0.5) / H) * np.pi
-    weight = np.broadcast_to(np.cos(lat)[:, None], (H, W)) * finite
-    weight = weight / (np.cos(lat).sum() * W)  # a share of the sphere
-    normals = surface_normals(torch.from_numpy(depth)).numpy()  # [H, W, 3]
-    pts = dirs * np.where(finite, depth, 0.0)[..., None]
+    work = _nearest_shrink(depth, WORK_WIDTH)  # [h, w]
+    h, w = work.shape
+    dirs = equirect_directions(h, w, dtype=torch.float64).numpy()  # [h, w, 3]
+    finite = np.isfinite(work) & (work > 0)
+    lat = (0.5 - (np.arange(h) + 0.5) / h) * np.pi
+    weight = np.broadcast_to(np.cos(lat)[:, None], (h, w)) * finite
+    weight = weight / (np.cos(lat).sum() * w)  # a share of the sphere
+    normals = surface_normals(torch.from_numpy(work)).numpy()  # [h, w, 3]
+    pts = dirs * np.where(finite, work, 0.0)[..., None]
     keep = finite.reshape(-1)
     axes = room_axes(normals, weight)
     planes = find_planes(pts.reshape(-1, 3)[keep], normals.reshape(-1, 3)[keep], weight.reshape(-1)[keep], axes, tol)
     if sum(p[2] for p in planes) < MIN_ROOM:  # not a room: an open scene, or curved surfaces
         return depth, {"planes": [], "on_planes": 0.0, "note": f"planes cover under {MIN_ROOM:.0%}: not a room"}
-    ratio, which = plane_depth_ratio(dirs, depth, normals, planes, tol)
+    ratio, which = plane_depth_ratio(dirs, work, normals, planes, tol)
     floors = [i for i, p in enumerate(planes) if p[0][1] > 0.9 and p[1] > 0]
     fitted, contacts = [p[1] for p in planes], [0] * len(planes)
     if floors:
-        offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol)
+        offsets, contacts = contact_offsets(dirs, work, which, planes, floors[0], tol)
         planes = [(p[0], o, p[2]) for p, o in zip(planes, offsets)]
-        ratio, _ = plane_depth_ratio(dirs, depth, normals, planes, np.inf, which)
-    log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * W)
+        ratio, _ = plane_depth_ratio(dirs, work, normals, planes, np.inf, which)
+    log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * w)  # [h, w], smooth
+    if (h, w) != (H, W):
+        from holoflow.geometry.sampling import resize_equirect
+
+        log_c = resize_equirect(torch.from_numpy(log_c)[None], H, W)[0].numpy()  # [H, W]
+        dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
+        finite = np.isfinite(depth) & (depth > 0)
+        lat = (0.5 - (np.arange(H) + 0.5) / H) * np.pi
+        weight = np.broadcast_to(np.cos(lat)[:, None], (H, W)) * finite / (np.cos(lat).sum() * W)
     out = np.where(finite, depth * np.exp(log_c), depth)
     ratio, on = plane_depth_ratio(dirs, out, None, planes, snap)
     out = np.where(on >= 0, out * ratio, out)
@@ -310,6 +335,18 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
         "correction": [float(np.exp(log_c[finite].min())), float(np.exp(log_c[finite].max()))],
     }
     return out, facts
+
+
+def _nearest_shrink(depth: np.ndarray, width: int) -> np.ndarray:
+    """Depth [H, W] -> [width // 2, width] by the nearest pixel (no depth between two surfaces); unchanged
+    when it is not wider than ``width``."""
+    H, W = depth.shape
+    if W <= width:
+        return depth
+    h = max(1, width // 2)
+    rows = np.minimum(((np.arange(h) + 0.5) * H / h).astype(int), H - 1)
+    cols = np.minimum(((np.arange(width) + 0.5) * W / width).astype(int), W - 1)
+    return depth[rows][:, cols]
 
 
 def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:

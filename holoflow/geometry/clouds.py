@@ -26,7 +26,9 @@ on its equirect grid:
 6. sampled by area (``pf_sampling``; polar caps sampled finer where the panorama's poles hold detail:
    holoflow/geometry/area.py).
 
-Colour is resampled antialiased, depth point-sampled (no invented edge depths). Colours returned are
+Colour is resampled antialiased; depth is point-sampled when shrunk and, when the cloud is wider than
+the depth (``depth_upsample``), enlarged guided by the colour (holoflow/geometry/upsample.py): either way
+no depth is invented between two surfaces. Colours returned are
 8-bit sRGB (the PLY convention, docs/conventions.md).
 """
 
@@ -85,7 +87,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
     pf_width = cfg.pf_width or min(rgb.shape[1], view_width(cfg.view_size, cfg.view_fov_deg), cfg.pf_max_width)
     clouds, counts, extra = {}, {}, {}
     for i, (name, width) in enumerate({"p0": cfg.p0_width, "pf": pf_width, "ps": cfg.ps_width}.items()):
-        col, d = resample_rgbd(srgb, depth, width)
+        col, d = resample_rgbd(srgb, depth, width, guided=cfg.depth_upsample == "guided")
         if cfg.opening_bars:
             d, found = keep_opening_bars(col, d, colour_tol=cfg.opening_colour_tol)
             counts[f"{name}_opening_bar_pixels"] = found["bar_pixels"]

@@ -68,6 +68,13 @@ class PointCloudParams(StageParams):
     view_size: int = param(512, "pf_width 0: the view size P_f must stay sharp at (paper 512)", "px", ge=1)
     view_fov_deg: float = param(47.43, "pf_width 0: that view's field of view (paper 47.43)", "deg", gt=0, lt=180)
     ps_width: int = param(256, "P_s: for the PCD-set projection", "px", ge=2)
+    depth_upsample: str = param(
+        "guided",
+        "a cloud wider than the depth: guided (each pixel takes the surface of the nearby depth "
+        "pixels whose colour matches its own: edges land on the colour's, no depth between two "
+        "surfaces; holoflow/geometry/upsample.py) or nearest (the nearest depth pixel)",
+        choices=("guided", "nearest"),
+    )
     grad_threshold: float = param(0.4, "P_f drops points whose relative depth gradient exceeds this (paper 0.4)", ge=0)
     grad_sides: str = param(
         "one_sided",

@@ -191,16 +191,24 @@ def sky_to_shell(radial_depth: torch.Tensor, radius: float) -> torch.Tensor:
     return torch.where(bounded, radial_depth, torch.full_like(radial_depth, radius))
 
 
-def resample_rgbd(rgb: torch.Tensor, radial_depth: torch.Tensor, width: int) -> tuple[torch.Tensor, torch.Tensor]:
+def resample_rgbd(
+    rgb: torch.Tensor, radial_depth: torch.Tensor, width: int, guided: bool = True
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Equirect RGB-D at ``width`` x ``width // 2``: rgb [H, W, C] -> [h, w, C] antialiased and wrap-aware
     (resize_equirect); radial_depth [H, W] -> [h, w] point-sampled (nearest source pixel), so no depth
-    is invented between a foreground edge and the background (and inf stays inf)."""
+    is invented between a foreground edge and the background (and inf stays inf). Enlarged with
+    ``guided``, the depth follows the resampled colour (sRGB in [0, 1]) instead:
+    holoflow.geometry.upsample, whose edges land on the colour's and which still puts no depth between
+    two surfaces."""
     from holoflow.geometry.sampling import resize_equirect, sample_equirect
+    from holoflow.geometry.upsample import guided_depth_upsample
 
     height = max(1, width // 2)
     if rgb.shape[:2] != (height, width):
         rgb = resize_equirect(rgb.permute(2, 0, 1), height, width).permute(1, 2, 0)
     if radial_depth.shape != (height, width):
+        if guided and radial_depth.shape[0] <= height and radial_depth.shape[1] <= width:
+            return rgb, guided_depth_upsample(radial_depth, rgb[..., :3])
         dirs = equirect_directions(height, width, device=radial_depth.device, dtype=radial_depth.dtype)
         radial_depth = sample_equirect(radial_depth[None, None], dirs[None], "nearest")[0, 0]
     return rgb, radial_depth
