@@ -35,8 +35,6 @@ MIN_ROOM = 0.3
 #: the planes are found on the depth shrunk to at most this width (nearest pixel): a network's per-pixel
 #: noise tilts the normals the more the finer the grid (at 2048 px the simulated network's found none)
 WORK_WIDTH = 1024
-#: spread_log_ratio: inside objects the bias comes from a Gaussian this many times wider
-FILL = 4.0
 #: relative engines whose depth carries a network's blur and low-frequency bias (``refine: auto`` mends it)
 BIASED_ENGINES = ("depth_anything", "simulated")
 
@@ -147,27 +145,17 @@ def plane_depth_ratio(
     return ratio, which
 
 
-def spread_log_ratio(
-    log_ratio: np.ndarray, known: np.ndarray, sigma: float, fade: float = 0.2, fill: float = FILL
-) -> np.ndarray:
+def spread_log_ratio(log_ratio: np.ndarray, known: np.ndarray, sigma: float, fade: float = 0.2) -> np.ndarray:
     """log_ratio [H, W] known on ``known`` [H, W] spread over the panorama by normalized Gaussian
-    convolution (``sigma`` pixels; columns wrap, rows clamp). Where the known pixels' local density is
-    below ``fade`` (inside an object, away from any plane) it blends into the same spread at ``fill`` x
-    ``sigma``: a network's bias is smooth across the image, so the planes around an object say what its
-    bias is; only where that wider spread's density is also below ``fade`` does it fade to 0 (no
-    correction)."""
+    convolution (``sigma`` pixels; columns wrap, rows clamp); it fades to 0 (no correction) where the
+    known pixels' local density is below ``fade``."""
     import scipy.ndimage as ndi
 
     mode = ("nearest", "wrap")
     w = known.astype(np.float64)
-    values = np.where(known, log_ratio, 0.0)
-    out = np.zeros_like(w)
-    for s in (sigma * fill, sigma):  # wide first, then the fine spread wherever it has the density
-        den = ndi.gaussian_filter(w, s, mode=mode)
-        spread = ndi.gaussian_filter(values, s, mode=mode) / np.maximum(den, 1e-12)
-        a = np.clip(den / fade, 0.0, 1.0)
-        out = a * spread + (1 - a) * out
-    return out
+    num = ndi.gaussian_filter(np.where(known, log_ratio, 0.0), sigma, mode=mode)
+    den = ndi.gaussian_filter(w, sigma, mode=mode)
+    return num / np.maximum(den, 1e-12) * np.clip(den / fade, 0.0, 1.0)
 
 
 def contact_offsets(
@@ -297,9 +285,7 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
     h, w = work.shape
     dirs = equirect_directions(h, w, dtype=torch.float64).numpy()  # [h, w, 3]
     finite = np.isfinite(work) & (work > 0)
-    lat = (0.5 - (np.arange(h) + 0.5) / h) * np.pi
-    weight = np.broadcast_to(np.cos(lat)[:, None], (h, w)) * finite
-    weight = weight / (np.cos(lat).sum() * w)  # a share of the sphere
+    weight = _sphere_share(finite)
     normals = surface_normals(torch.from_numpy(work)).numpy()  # [h, w, 3]
     pts = dirs * np.where(finite, work, 0.0)[..., None]
     keep = finite.reshape(-1)
@@ -321,8 +307,7 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
         log_c = resize_equirect(torch.from_numpy(log_c)[None], H, W)[0].numpy()  # [H, W]
         dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
         finite = np.isfinite(depth) & (depth > 0)
-        lat = (0.5 - (np.arange(H) + 0.5) / H) * np.pi
-        weight = np.broadcast_to(np.cos(lat)[:, None], (H, W)) * finite / (np.cos(lat).sum() * W)
+        weight = _sphere_share(finite)
     out = np.where(finite, depth * np.exp(log_c), depth)
     ratio, on = plane_depth_ratio(dirs, out, None, planes, snap)
     out = np.where(on >= 0, out * ratio, out)
@@ -335,6 +320,13 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
         "correction": [float(np.exp(log_c[finite].min())), float(np.exp(log_c[finite].max()))],
     }
     return out, facts
+
+
+def _sphere_share(finite: np.ndarray) -> np.ndarray:
+    """Each equirect pixel's share [H, W] of the sphere's solid angle, 0 where not ``finite`` [H, W]."""
+    H, W = finite.shape
+    lat = (0.5 - (np.arange(H) + 0.5) / H) * np.pi
+    return np.broadcast_to(np.cos(lat)[:, None], (H, W)) * finite / (np.cos(lat).sum() * W)
 
 
 def _nearest_shrink(depth: np.ndarray, width: int) -> np.ndarray:

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from holoflow.depth import planes
-from holoflow.depth.planes import refine_with_planes, room_axes, spread_log_ratio, wanted
+from holoflow.depth.planes import refine_with_planes, room_axes, wanted
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.geometry.surfaces import surface_normals
 
@@ -110,21 +110,6 @@ def test_a_round_wall_is_not_flattened():
     out, facts = refine_with_planes(t)
     assert sorted(round(p["offset"], 3) for p in facts["planes"]) == [-1.2, 1.5]
     assert abs_rel(out, t) < 1e-3
-
-
-def test_an_object_takes_the_bias_of_the_planes_around_it():
-    """The bias known on the planes reaches the middle of an object 10 sigma wide (the fine spread alone
-    fades to no correction there); a region farther than the wide spread reaches stays uncorrected."""
-    H, W, sigma = 128, 256, 4.0
-    known = np.ones((H, W), bool)
-    known[44:84, 40:80] = False  # an object 40 px across
-    known[:, 140:] = False  # no plane at all over 116 columns
-    log_ratio = np.full((H, W), 0.05)
-    out = spread_log_ratio(log_ratio, known, sigma)
-    assert abs(out[64, 60] - 0.05) < 1e-3
-    assert abs(spread_log_ratio(log_ratio, known, sigma, fill=1.0)[64, 60]) < 1e-3
-    assert abs(out[64, 198]) < 1e-3
-    assert np.allclose(out[known], 0.05)
 
 
 def test_planes_found_on_the_shrunk_depth_straighten_the_full_one(monkeypatch):
