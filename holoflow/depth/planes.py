@@ -32,9 +32,6 @@ MIN_WIDTH = 256
 CURVED = 0.02
 #: the planes must cover this share of the sphere for the scene to be a room (else nothing is changed)
 MIN_ROOM = 0.3
-#: the planes are found on the depth shrunk to at most this width (nearest pixel): a network's per-pixel
-#: noise tilts the normals the more the finer the grid (at 2048 px the simulated network's found none)
-WORK_WIDTH = 1024
 #: relative engines whose depth carries a network's blur and low-frequency bias (``refine: auto`` mends it)
 BIASED_ENGINES = ("depth_anything", "simulated")
 
@@ -281,33 +278,26 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
 
     depth = np.asarray(depth, np.float64)
     H, W = depth.shape
-    work = _nearest_shrink(depth, WORK_WIDTH)  # [h, w]
-    h, w = work.shape
-    dirs = equirect_directions(h, w, dtype=torch.float64).numpy()  # [h, w, 3]
-    finite = np.isfinite(work) & (work > 0)
-    weight = _sphere_share(finite)
-    normals = surface_normals(torch.from_numpy(work)).numpy()  # [h, w, 3]
-    pts = dirs * np.where(finite, work, 0.0)[..., None]
+    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
+    finite = np.isfinite(depth) & (depth > 0)
+    lat = (0.5 - (np.arange(H) + 0.5) / H) * np.pi
+    weight = np.broadcast_to(np.cos(lat)[:, None], (H, W)) * finite
+    weight = weight / (np.cos(lat).sum() * W)  # a share of the sphere
+    normals = surface_normals(torch.from_numpy(depth)).numpy()  # [H, W, 3]
+    pts = dirs * np.where(finite, depth, 0.0)[..., None]
     keep = finite.reshape(-1)
     axes = room_axes(normals, weight)
     planes = find_planes(pts.reshape(-1, 3)[keep], normals.reshape(-1, 3)[keep], weight.reshape(-1)[keep], axes, tol)
     if sum(p[2] for p in planes) < MIN_ROOM:  # not a room: an open scene, or curved surfaces
         return depth, {"planes": [], "on_planes": 0.0, "note": f"planes cover under {MIN_ROOM:.0%}: not a room"}
-    ratio, which = plane_depth_ratio(dirs, work, normals, planes, tol)
+    ratio, which = plane_depth_ratio(dirs, depth, normals, planes, tol)
     floors = [i for i, p in enumerate(planes) if p[0][1] > 0.9 and p[1] > 0]
     fitted, contacts = [p[1] for p in planes], [0] * len(planes)
     if floors:
-        offsets, contacts = contact_offsets(dirs, work, which, planes, floors[0], tol)
+        offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol)
         planes = [(p[0], o, p[2]) for p, o in zip(planes, offsets)]
-        ratio, _ = plane_depth_ratio(dirs, work, normals, planes, np.inf, which)
-    log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * w)  # [h, w], smooth
-    if (h, w) != (H, W):
-        from holoflow.geometry.sampling import resize_equirect
-
-        log_c = resize_equirect(torch.from_numpy(log_c)[None], H, W)[0].numpy()  # [H, W]
-        dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
-        finite = np.isfinite(depth) & (depth > 0)
-        weight = _sphere_share(finite)
+        ratio, _ = plane_depth_ratio(dirs, depth, normals, planes, np.inf, which)
+    log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * W)
     out = np.where(finite, depth * np.exp(log_c), depth)
     ratio, on = plane_depth_ratio(dirs, out, None, planes, snap)
     out = np.where(on >= 0, out * ratio, out)
@@ -320,25 +310,6 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
         "correction": [float(np.exp(log_c[finite].min())), float(np.exp(log_c[finite].max()))],
     }
     return out, facts
-
-
-def _sphere_share(finite: np.ndarray) -> np.ndarray:
-    """Each equirect pixel's share [H, W] of the sphere's solid angle, 0 where not ``finite`` [H, W]."""
-    H, W = finite.shape
-    lat = (0.5 - (np.arange(H) + 0.5) / H) * np.pi
-    return np.broadcast_to(np.cos(lat)[:, None], (H, W)) * finite / (np.cos(lat).sum() * W)
-
-
-def _nearest_shrink(depth: np.ndarray, width: int) -> np.ndarray:
-    """Depth [H, W] -> [width // 2, width] by the nearest pixel (no depth between two surfaces); unchanged
-    when it is not wider than ``width``."""
-    H, W = depth.shape
-    if W <= width:
-        return depth
-    h = max(1, width // 2)
-    rows = np.minimum(((np.arange(h) + 0.5) * H / h).astype(int), H - 1)
-    cols = np.minimum(((np.arange(width) + 0.5) * W / width).astype(int), W - 1)
-    return depth[rows][:, cols]
 
 
 def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:

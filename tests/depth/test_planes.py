@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 import torch
 
-from holoflow.depth import planes
 from holoflow.depth.planes import refine_with_planes, room_axes, wanted
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.geometry.surfaces import surface_normals
@@ -110,15 +109,3 @@ def test_a_round_wall_is_not_flattened():
     out, facts = refine_with_planes(t)
     assert sorted(round(p["offset"], 3) for p in facts["planes"]) == [-1.2, 1.5]
     assert abs_rel(out, t) < 1e-3
-
-
-def test_planes_found_on_the_shrunk_depth_straighten_the_full_one(monkeypatch):
-    """A depth wider than WORK_WIDTH: the planes and the correction come from it shrunk, the correction
-    is enlarged back and the pixels are laid on the planes at full size, as well as without shrinking."""
-    truth = turned_room(256, 512)
-    bent = truth * bias_field(*truth.shape) * np.exp(np.random.default_rng(0).normal(0, 0.01, truth.shape))
-    full, _ = refine_with_planes(bent)
-    monkeypatch.setattr(planes, "WORK_WIDTH", 256)
-    out, facts = refine_with_planes(bent)
-    assert out.shape == truth.shape and len(facts["planes"]) == 6 and facts["on_planes"] > 0.8
-    assert abs_rel(out, truth) < min(0.55 * abs_rel(bent, truth), 1.1 * abs_rel(full, truth))
