@@ -29,8 +29,9 @@ from holoflow.geometry.sampling import resize_equirect
 def guided_depth_upsample(
     radial_depth: torch.Tensor, guide: torch.Tensor, sigma_px: float = 0.75, sigma_rgb: float = 0.06, tol: float = 0.05
 ) -> torch.Tensor:
-    """Radial depth [h, w] (metres, inf sky) -> [H, W], the size of ``guide`` [H, W, 3] (sRGB in [0, 1]),
-    which must be at least as large along both axes. Module docstring for the rule."""
+    """Radial depth [h, w] (metres; non-finite or <= 0 = sky) -> [H, W] (inf sky), the size of ``guide``
+    [H, W, 3] (sRGB in [0, 1]), which must be at least as large along both axes. Module docstring for the
+    rule."""
     h, w = radial_depth.shape
     H, W = guide.shape[:2]
     if H < h or W < w:
