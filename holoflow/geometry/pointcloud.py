@@ -192,7 +192,7 @@ def sky_to_shell(radial_depth: torch.Tensor, radius: float) -> torch.Tensor:
 
 
 def resample_rgbd(
-    rgb: torch.Tensor, radial_depth: torch.Tensor, width: int, guided: bool = True
+    rgb: torch.Tensor, radial_depth: torch.Tensor, width: int, guided: bool = False
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Equirect RGB-D at ``width`` x ``width // 2``: rgb [H, W, C] -> [h, w, C] antialiased and wrap-aware
     (resize_equirect); radial_depth [H, W] -> [h, w] point-sampled (nearest source pixel), so no depth

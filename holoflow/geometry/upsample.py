@@ -65,6 +65,5 @@ def guided_depth_upsample(
     sky_best = sky.gather(0, best)  # [1, H, W]
     same = torch.where(sky_best, sky, ~sky & ((d - d_best).abs() <= tol * d_best))  # [9, H, W]
     weight = torch.exp(score_t.gather(0, best) - score_t) * same  # [9, H, W]; the best's weight is 1
-    mean = (weight * d).sum(0) / weight.sum(0)  # [H, W]
-    inf = torch.full_like(mean, float("inf"))
-    return torch.where(sky_best[0], inf, 1.0 / torch.where(sky_best[0], torch.ones_like(mean), mean))
+    mean = (weight * d).sum(0) / weight.sum(0)  # [H, W] disparity; the sky's is 0
+    return 1.0 / mean  # the sky's is inf

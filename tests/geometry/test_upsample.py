@@ -103,5 +103,5 @@ def test_resample_rgbd_guides_only_when_enlarging():
     shrunk_rgb, shrunk = resample_rgbd(colour, truth, 48)
     assert shrunk.shape == (24, 48) and set(shrunk.unique().tolist()) <= {NEAR, FAR}
     torch.testing.assert_close(shrunk_rgb, resize_equirect(colour.permute(2, 0, 1), 24, 48).permute(1, 2, 0))
-    _, enlarged = resample_rgbd(colour, shrink_depth(truth, 24, 48), 96)
+    _, enlarged = resample_rgbd(colour, shrink_depth(truth, 24, 48), 96, guided=True)
     torch.testing.assert_close(enlarged, truth)
