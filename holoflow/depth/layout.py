@@ -273,29 +273,33 @@ def compose_depth(
     return np.where(lat >= lat_top[None, :], ceil, depth)
 
 
+def work_srgb8(pano: np.ndarray, width: int) -> np.ndarray:
+    """The copy of a linear RGB panorama [H, W, 3] that line and colour analysis runs on: at most
+    ``width`` px wide (even, at least 16), exposure-normalised (median grey 0.18, so a dark or HDR
+    panorama is analysed like a well-exposed one), 8-bit sRGB [width // 2, width, 3]."""
+    from holoflow.geometry.sampling import resize_pano
+    from holoflow.imageops.color import linear_to_uint8
+
+    pano = np.nan_to_num(np.asarray(pano, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    Wk = max(16, min(int(width), pano.shape[1]))
+    work = resize_pano(pano, Wk - Wk % 2)
+    med = float(np.median(work.mean(-1)))
+    work = work * (0.18 / med) if med > 1e-6 else work
+    return linear_to_uint8(np.clip(work, 0.0, 1.0))
+
+
 def estimate_layout_depth(
     pano: np.ndarray, cfg: LayoutConfig | None = None, out_shape: tuple[int, int] | None = None
 ) -> LayoutDepth:
     """Radial depth [H, W] (metres, +inf sky) of a linear RGB panorama [H, W, 3] (module docstring)."""
-    from holoflow.imageops.color import linear_to_uint8
-
     cfg = cfg or LayoutConfig()
     if cfg.camera_height <= 0:
         raise ValueError(f"layout: camera_height must be > 0 metres, got {cfg.camera_height}")
     if cfg.scene not in ("auto", "indoor", "outdoor"):
         raise ValueError(f"layout: scene must be auto, indoor or outdoor, got {cfg.scene!r}")
-    pano = np.nan_to_num(np.asarray(pano, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
     H0, W0 = out_shape or pano.shape[:2]
-    Wk = max(16, min(int(cfg.work_width), pano.shape[1]))
-    Wk -= Wk % 2
-    Hk = Wk // 2
-    from holoflow.geometry.sampling import resize_pano
-
-    work = resize_pano(pano, Wk)
-    # exposure-normalise so a dark or HDR (> 1) panorama is analysed like a well-exposed one
-    med = float(np.median(work.mean(-1)))
-    work = work * (0.18 / med) if med > 1e-6 else work
-    srgb = linear_to_uint8(np.clip(work, 0.0, 1.0))
+    srgb = work_srgb8(pano, cfg.work_width)
+    Hk, Wk = srgb.shape[:2]
     facts: dict = {"config": asdict(cfg), "work_size": [Wk, Hk]}
     R = None
     if cfg.upright:

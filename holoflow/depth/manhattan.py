@@ -79,6 +79,14 @@ def manhattan_yaw(normals: np.ndarray, lengths: np.ndarray) -> tuple[float | Non
     }
 
 
+def panorama_yaw(srgb8: np.ndarray) -> tuple[float | None, dict]:
+    """``manhattan_yaw`` of the straight lines of an 8-bit sRGB panorama [H, W, 3] (``segment_rays``):
+    the heading (radians, atan2(x, z), modulo 90 deg) of the room's walls, None with fewer than 10
+    horizontal lines, and its facts."""
+    _, _, normals, lengths = segment_rays(srgb8)
+    return manhattan_yaw(normals, lengths)
+
+
 def segment_evidence(
     p1: np.ndarray,
     p2: np.ndarray,

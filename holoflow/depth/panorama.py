@@ -206,7 +206,13 @@ def metric_from_disparity(
     depth = sky_mixed_edges(depth)
     if planes.wanted(cfg.refine, relative_engine) and depth.shape[1] >= planes.MIN_WIDTH:
         depth, fit["sharpened"] = sharpen_edges(depth)
-        depth, fit["planes"] = planes.refine_with_planes(depth)
+        yaw = None
+        if cfg.room_yaw == "lines":
+            from holoflow.depth.layout import work_srgb8
+            from holoflow.depth.manhattan import panorama_yaw
+
+            yaw, fit["room_yaw"] = panorama_yaw(work_srgb8(pano, 512))
+        depth, fit["planes"] = planes.refine_with_planes(depth, yaw=yaw)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
 
 

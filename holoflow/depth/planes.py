@@ -42,15 +42,17 @@ def wanted(mode: str, relative_engine: str) -> bool:
     return mode == "on" or (mode == "auto" and relative_engine in BIASED_ENGINES)
 
 
-def room_axes(normals: np.ndarray, weight: np.ndarray) -> np.ndarray:
+def room_axes(normals: np.ndarray, weight: np.ndarray, yaw: float | None = None) -> np.ndarray:
     """The room's three axes [3, 3] (rows: vertical (0, 1, 0), then the two horizontal wall axes) from
     unit normals [H, W, 3] weighted by [H, W]: the wall normals' dominant direction modulo 90 deg
-    (circular mean of 4 x their heading)."""
-    n = normals.reshape(-1, 3)
-    w = weight.reshape(-1) * (np.abs(n[:, 1]) < np.sin(np.radians(NORMAL_DEG)))  # wall-like normals
-    heading = np.arctan2(n[:, 0], n[:, 2])
-    z = np.sum(w * np.exp(4j * heading))
-    yaw = float(np.angle(z) / 4.0) if abs(z) > 0 else 0.0
+    (circular mean of 4 x their heading, atan2(x, z)); or, given ``yaw`` (radians, the same heading),
+    from that."""
+    if yaw is None:
+        n = normals.reshape(-1, 3)
+        w = weight.reshape(-1) * (np.abs(n[:, 1]) < np.sin(np.radians(NORMAL_DEG)))  # wall-like normals
+        heading = np.arctan2(n[:, 0], n[:, 2])
+        z = np.sum(w * np.exp(4j * heading))
+        yaw = float(np.angle(z) / 4.0) if abs(z) > 0 else 0.0
     a = np.array([np.sin(yaw), 0.0, np.cos(yaw)])
     b = np.array([np.cos(yaw), 0.0, -np.sin(yaw)])
     return np.stack([np.array([0.0, 1.0, 0.0]), a, b])
@@ -257,13 +259,17 @@ def _solve_offsets(edges: list, n: int, ground: int, x_ground: float, free: set)
     return x, reached
 
 
-def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, sigma_frac: float = 1 / 128) -> tuple:
+def refine_with_planes(
+    depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, sigma_frac: float = 1 / 128, yaw: float | None = None
+) -> tuple:
     """Radial depth [H, W] (metres, +inf sky) straightened by the room's planes, and facts (dict: the
     planes, the share of the panorama on them, the correction's range).
 
-    1. normals of the depth; the room's axes (``room_axes``); its planes (``find_planes``, tolerance
-       ``tol``); the floor (the heaviest horizontal plane below the eye) keeps its fitted offset, every
-       other plane takes the offset its contacts imply (``contact_offsets``);
+    1. normals of the depth; the room's axes (``room_axes``; turned by ``yaw`` when it is given: the
+       heading of the walls found otherwise, e.g. from the panorama's straight lines); its planes
+       (``find_planes``, tolerance ``tol``); the floor (the heaviest horizontal plane below the eye)
+       keeps its fitted offset, every other plane takes the offset its contacts imply
+       (``contact_offsets``);
     2. on the plane pixels the ratio plane / depth samples the network's low-frequency bias: its log,
        spread over the panorama with a Gaussian of ``sigma_frac`` x width pixels, multiplies every pixel;
     3. pixels within ``snap`` of a plane are laid on it, whatever their normal says: a network's normals
@@ -286,7 +292,7 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
     normals = surface_normals(torch.from_numpy(depth)).numpy()  # [H, W, 3]
     pts = dirs * np.where(finite, depth, 0.0)[..., None]
     keep = finite.reshape(-1)
-    axes = room_axes(normals, weight)
+    axes = room_axes(normals, weight, yaw)
     planes = find_planes(pts.reshape(-1, 3)[keep], normals.reshape(-1, 3)[keep], weight.reshape(-1)[keep], axes, tol)
     if sum(p[2] for p in planes) < MIN_ROOM:  # not a room: an open scene, or curved surfaces
         return depth, {"planes": [], "on_planes": 0.0, "note": f"planes cover under {MIN_ROOM:.0%}: not a room"}
@@ -307,6 +313,7 @@ def refine_with_planes(depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, 
             for p, f, c in zip(planes, fitted, contacts)
         ],
         "on_planes": float(weight[on >= 0].sum()),
+        "yaw_deg": round(float(np.degrees(np.arctan2(axes[1][0], axes[1][2]))), 3),
         "correction": [float(np.exp(log_c[finite].min())), float(np.exp(log_c[finite].max()))],
     }
     return out, facts

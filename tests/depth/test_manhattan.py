@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from holoflow.depth.layout import LayoutConfig, estimate_layout_depth
-from holoflow.depth.manhattan import manhattan_dp, manhattan_yaw, segment_evidence, wall_distances
+from holoflow.depth.manhattan import manhattan_dp, manhattan_yaw, panorama_yaw, segment_evidence, wall_distances
 
 
 def _box(H, W, yaw, walls, h=1.6, ceiling=1.1):
@@ -126,6 +126,18 @@ def test_layout_recovers_a_rendered_manhattan_room():
     assert np.isfinite(est.depth).all()
     assert np.median(rel) < 0.05 and rel.mean() < 0.12, (np.median(rel), rel.mean(), est.facts)
     assert abs(est.facts["ceiling_above_eye_m"] - ceiling) / ceiling < 0.15
+
+
+def test_panorama_yaw_reads_the_walls_heading_from_the_image_alone():
+    """The heading of a rendered room's walls from its straight lines (what metric_align's planes use
+    instead of a network's tilted normals), modulo 90 degrees."""
+    from holoflow.depth.layout import work_srgb8
+
+    for deg in (25.0, 70.0):
+        img, _ = _rendered_room(256, 512, np.radians(deg), [2.0, 3.2, 2.6, 4.0], 1.6, 1.1)
+        yaw, facts = panorama_yaw(work_srgb8(img, 512))
+        assert yaw is not None and facts["horizontal_segments"] >= 10
+        assert abs(np.degrees(np.angle(np.exp(4j * (yaw - np.radians(deg))))) / 4) < 1.0, (deg, facts)
 
 
 def test_capped_region_cost_bridges_a_block_of_contradicting_columns():

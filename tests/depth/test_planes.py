@@ -67,6 +67,21 @@ def test_a_bent_room_is_straightened_onto_its_walls():
     assert facts["on_planes"] > 0.8
 
 
+def test_a_given_yaw_turns_the_axes_whatever_the_normals_say():
+    """The heading of the walls found elsewhere (the panorama's straight lines) sets the axes: a bias
+    that tilts the normals does not tilt the planes, and the bent room is straightened as well."""
+    truth = turned_room()
+    n = surface_normals(torch.from_numpy(truth)).numpy()
+    axes = room_axes(n, np.ones(truth.shape), yaw=YAW + math.radians(3.0))
+    assert np.allclose(axes[1], [math.sin(YAW + math.radians(3.0)), 0.0, math.cos(YAW + math.radians(3.0))])
+    assert np.allclose(axes[2] @ axes[1], 0.0) and np.allclose(axes[0], [0.0, 1.0, 0.0])
+    bent = truth * bias_field(*truth.shape) * np.exp(np.random.default_rng(0).normal(0, 0.01, truth.shape))
+    out, facts = refine_with_planes(bent, yaw=YAW)
+    assert math.isclose(facts["yaw_deg"], math.degrees(YAW), abs_tol=1e-3)
+    assert abs_rel(out, truth) < 0.55 * abs_rel(bent, truth)
+    assert len(facts["planes"]) == 6
+
+
 def test_exact_depth_stays_as_it_is():
     truth = turned_room()
     out, facts = refine_with_planes(truth)
