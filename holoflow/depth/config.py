@@ -111,8 +111,8 @@ class MetricAlignParams(StageParams):
     room_yaw: str = param(
         "lines",
         "refine: the heading of the room's walls for its planes: lines = the panorama's straight lines "
-        "(holoflow/depth/manhattan.py; the depth's normals when it has under 10 horizontal ones), normals "
-        "= the depth's surface normals, which a network's bias tilts",
+        "(holoflow/depth/manhattan.py; the depth's normals when fewer than 10 of them are horizontal), "
+        "normals = the depth's surface normals, which a network's bias tilts",
         choices=("lines", "normals"),
     )
     camera_height: float = _camera_height()

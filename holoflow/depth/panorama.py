@@ -208,10 +208,10 @@ def metric_from_disparity(
         depth, fit["sharpened"] = sharpen_edges(depth)
         yaw = None
         if cfg.room_yaw == "lines":
-            from holoflow.depth.layout import work_srgb8
+            from holoflow.depth.layout import LayoutConfig, work_srgb8
             from holoflow.depth.manhattan import panorama_yaw
 
-            yaw, fit["room_yaw"] = panorama_yaw(work_srgb8(pano, 512))
+            yaw, fit["room_yaw"] = panorama_yaw(work_srgb8(pano, LayoutConfig.work_width))  # the layout's lines
         depth, fit["planes"] = planes.refine_with_planes(depth, yaw=yaw)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
 
