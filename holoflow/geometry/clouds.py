@@ -57,6 +57,9 @@ from holoflow.geometry.surfaces import smooth_depth, surface_normals
 from holoflow.imageops.color import linear_to_srgb_torch
 
 
+SKY_RIM_PX = 2  # clean_sky: sky pixels this close to anything else mix in its colour
+
+
 @dataclass
 class Cloud:
     """One point cloud: xyz [N, 3] (world metres), rgb [N, 3] (uint8 sRGB), normals [N, 3] (unit,
@@ -138,13 +141,14 @@ def _pf_cloud(
     radius ``shell``), steps 2-6 of the module docstring: (the cloud, {"counts", "caps", "polar_detail",
     "dome_width"})."""
     d_open = torch.where(sky, torch.full_like(d, math.inf), d)  # the openings' sky, for their reveals
+    sky_col = clean_sky(col, sky)  # [h, w, 3]: what lies unseen behind the room is sky, not its rims
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
     d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise)
     normals = surface_normals(d, cfg.layer_tol)  # [h, w, 3]
     keep = depth_gradient_mask(d, cfg.grad_threshold, cfg.grad_sides == "one_sided")
     layers = []
     if cfg.layer_baseline > 0:  # the far sides continued under the silhouettes: each its own, then the farthest
-        args = (col, d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg, cfg.layer_stride, cfg.layer_slope)
+        args = (torch.where(sky[..., None], sky_col, col), d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg, cfg.layer_stride, cfg.layer_slope)
         own = background_layer(*args, shell=shell, farthest=False)
         far = background_layer(*args, shell=shell, farthest=True)
         behind = torch.isfinite(far[0]) & ~(torch.isfinite(own[0]) & (far[0] < own[0] * (1 + cfg.layer_tol)))
@@ -160,7 +164,7 @@ def _pf_cloud(
             cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)
             caps, detail = called_for(caps, cap_rgb, col.shape[1], cfg.pf_polar_detail)
             detail = {k: float(f"{v:.4g}") for k, v in detail.items()}
-        xyz, c, pixel = equirect_to_area_points(col, d, caps, cap_rgb)
+        xyz, c, pixel = equirect_to_area_points(torch.where(sky[..., None], sky_col, col), d, caps, cap_rgb)
         n = normals.reshape(-1, 3)[pixel]
     else:
         xyz, c = equirect_to_points(col, d)
@@ -178,26 +182,41 @@ def _pf_cloud(
         counts["pf_reveal"] = int(len(rxyz))
     dome_width = max(8, col.shape[1] // cfg.sky_dome_coarse)
     if cfg.sky_dome and bool(sky.any()):
-        dxyz, dc = sky_dome(col, sky, shell * 1.05, dome_width)
+        dxyz, dc = sky_dome(sky_col, sky, shell * 1.05, dome_width)
         xyz, c, n = _append((xyz, c, n), (dxyz, dc, -dxyz / torch.linalg.vector_norm(dxyz, dim=-1, keepdim=True)))
         counts["pf_dome"] = int(len(dxyz))
     return Cloud(xyz, _to_u8(c), n), {"counts": counts, "caps": caps, "polar_detail": detail, "dome_width": dome_width}
 
 
+def clean_sky(rgb: torch.Tensor, sky: torch.Tensor, rim_px: int = SKY_RIM_PX) -> torch.Tensor:
+    """Every pixel of an equirect grid rgb [H, W, C] given the colour of the sky [H, W] (bool) nearest to
+    it, from the sky's pixels more than ``rim_px`` px from anything else (``fill_from``): the rim a frame
+    or a bar shares with the sky mixes in their colour, which on the unseen sky behind them (the layer,
+    the dome) would draw ghost frames and grey panes. Sky too thin to have an inside keeps its own
+    colour; without sky, rgb comes back unchanged."""
+    import torch.nn.functional as F
+
+    from holoflow.geometry.sampling import pad_equirect
+
+    if not bool(sky.any()):
+        return rgb
+    k = 2 * rim_px + 1
+    other = pad_equirect((~sky).to(rgb.dtype)[None], rim_px)  # [1, H + 2r, W + 2r]
+    inside = sky & (F.max_pool2d(other[None], k, stride=1)[0, 0] == 0)
+    return fill_from(rgb, inside if bool(inside.any()) else sky)
+
+
 def sky_dome(rgb: torch.Tensor, sky: torch.Tensor, radius: float, width: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The sky dome (module docstring, step 5) of an equirect grid rgb [H, W, C] whose sky is sky [H, W]
-    (bool, at least one pixel): points xyz [M, 3] on a sphere of ``radius`` metres, one per pixel of a
-    ``width`` x ``width // 2`` grid whose direction the panorama does not see as sky, and their colour
-    [M, C]: the sky's own colours spread into the rest (``fill_from``)."""
+    """The sky dome (module docstring, step 5) of an equirect grid rgb [H, W, C] that holds the sky's
+    colour everywhere (``clean_sky``), whose sky is sky [H, W] (bool, at least one pixel): points xyz
+    [M, 3] on a sphere of ``radius`` metres, one per pixel of a ``width`` x ``width // 2`` grid whose
+    direction the panorama does not see as sky, and their colour [M, C]."""
     h = max(1, width // 2)
-    small = resize_equirect(
-        torch.cat([rgb * sky[..., None], sky[..., None].to(rgb.dtype)], -1).permute(2, 0, 1), h, width
-    ).permute(1, 2, 0)  # [h, w, C + 1]
-    weight = small[..., -1]
-    colour = fill_from(small[..., :-1] / weight.clamp_min(1e-12)[..., None], weight > 1e-3)
-    where = weight < 0.999  # not all sky: the dome behind
+    small = resize_equirect(torch.cat([rgb, sky[..., None].to(rgb.dtype)], -1).permute(2, 0, 1), h, width)
+    small = small.permute(1, 2, 0)  # [h, w, C + 1]
+    where = small[..., -1] < 0.999  # not all sky: the dome behind
     dirs = equirect_directions(h, width, dtype=rgb.dtype)
-    return dirs[where] * radius, colour[where]
+    return dirs[where] * radius, small[..., :-1][where]
 
 
 def fill_from(values: torch.Tensor, known: torch.Tensor) -> torch.Tensor:

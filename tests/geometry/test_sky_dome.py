@@ -3,7 +3,7 @@ everything in the directions that are not sky, coloured by the sky; none without
 
 import torch
 
-from holoflow.geometry.clouds import fill_from, point_clouds, sky_dome
+from holoflow.geometry.clouds import clean_sky, fill_from, point_clouds, sky_dome
 from holoflow.geometry.config import PointCloudParams
 from holoflow.geometry.sphere import equirect_directions
 
@@ -34,7 +34,7 @@ def _room_with_window(H=64, W=128):
 
 def test_the_dome_is_behind_the_shell_where_the_panorama_is_not_sky_coloured_as_the_sky():
     rgb, _, window = _room_with_window()
-    xyz, colour = sky_dome(rgb, window, 10.0, 64)
+    xyz, colour = sky_dome(clean_sky(rgb, window), window, 10.0, 64)
     assert len(xyz) > 0.9 * 64 * 32 * (1 - window.double().mean())
     assert torch.allclose(torch.linalg.vector_norm(xyz, dim=-1), torch.full((len(xyz),), 10.0, dtype=xyz.dtype))
     assert torch.allclose(colour, torch.tensor([0.5, 0.7, 0.9]).expand_as(colour), atol=1e-5)
@@ -52,3 +52,23 @@ def test_point_clouds_add_a_dome_only_where_there_is_sky():
         rgb, depth, PointCloudParams(pf_width=128, layer_baseline=0.0, pf_polar_density=1.0, sky_dome=False)
     )
     assert "dome" not in off.pf
+
+
+def test_the_sky_behind_the_room_takes_the_sky_inside_the_window_not_its_rim():
+    """A frame's colour mixed into the window's outer pixels (antialiasing, a network's blur) is no part
+    of the sky the dome and the layer continue behind the wall: they take the colour inside."""
+    rgb, _, window = _room_with_window()
+    inner = window.clone()
+    for axis in (0, 1):
+        for shift in (-1, 1):
+            inner &= torch.roll(window, shift, axis)
+    rim = window & ~inner  # the window's outermost pixels: half frame, half sky
+    assert rim.any() and inner.any()
+    mixed = torch.where(rim[..., None], torch.tensor([0.4, 0.45, 0.5]), rgb)
+    clean = clean_sky(mixed, window, rim_px=1)
+    assert torch.allclose(clean, torch.tensor([0.5, 0.7, 0.9]).expand_as(clean))
+    _, colour = sky_dome(clean, window, 10.0, 64)
+    assert torch.allclose(colour, torch.tensor([0.5, 0.7, 0.9]).expand_as(colour), atol=1e-5)
+    _, raw = sky_dome(fill_from(mixed, window), window, 10.0, 64)  # the rim taken as sky
+    assert (raw - torch.tensor([0.5, 0.7, 0.9])).abs().amax() > 0.05
+    assert torch.equal(clean_sky(rgb, torch.zeros_like(window)), rgb)  # no sky: nothing to clean
