@@ -19,7 +19,8 @@ on its equirect grid:
    as an eye move of ``layer_baseline`` metres uncovers (holoflow/geometry/layers.py): each
    silhouette's own far side, and where a farther surface reaches under it, that one too; where the
    panorama shows sky, a sky dome behind everything (``sky_dome``): one coarse point per direction that
-   is not sky, just beyond the shell, coloured by the sky around it (``fill_from``), so that an eye
+   is not sky, just beyond the shell, coloured by the sky around it (``clean_sky``: the sky inside the
+   openings, never the rim a frame mixes in; the shell's and the layer's sky take it too), so that an eye
    off the centre looking out of a window past its frame sees sky, never the void; before the dome,
    the side of a window's recess and the frame that the wall's edge hides from the centre
    (``opening_reveals``, holoflow/geometry/openings.py), so that such an eye sees them, not the sky;
@@ -55,7 +56,6 @@ from holoflow.geometry.sampling import resize_equirect
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.geometry.surfaces import smooth_depth, surface_normals
 from holoflow.imageops.color import linear_to_srgb_torch
-
 
 SKY_RIM_PX = 2  # clean_sky: sky pixels this close to anything else mix in its colour
 
@@ -142,13 +142,23 @@ def _pf_cloud(
     "dome_width"})."""
     d_open = torch.where(sky, torch.full_like(d, math.inf), d)  # the openings' sky, for their reveals
     sky_col = clean_sky(col, sky)  # [h, w, 3]: what lies unseen behind the room is sky, not its rims
+    col_sky = torch.where(sky[..., None], sky_col, col)  # the shell's points: the sky's colour
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
     d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise)
     normals = surface_normals(d, cfg.layer_tol)  # [h, w, 3]
     keep = depth_gradient_mask(d, cfg.grad_threshold, cfg.grad_sides == "one_sided")
     layers = []
     if cfg.layer_baseline > 0:  # the far sides continued under the silhouettes: each its own, then the farthest
-        args = (torch.where(sky[..., None], sky_col, col), d, keep, cfg.layer_baseline, cfg.layer_tol, cfg.layer_max_deg, cfg.layer_stride, cfg.layer_slope)
+        args = (
+            col_sky,
+            d,
+            keep,
+            cfg.layer_baseline,
+            cfg.layer_tol,
+            cfg.layer_max_deg,
+            cfg.layer_stride,
+            cfg.layer_slope,
+        )
         own = background_layer(*args, shell=shell, farthest=False)
         far = background_layer(*args, shell=shell, farthest=True)
         behind = torch.isfinite(far[0]) & ~(torch.isfinite(own[0]) & (far[0] < own[0] * (1 + cfg.layer_tol)))
@@ -164,10 +174,10 @@ def _pf_cloud(
             cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)
             caps, detail = called_for(caps, cap_rgb, col.shape[1], cfg.pf_polar_detail)
             detail = {k: float(f"{v:.4g}") for k, v in detail.items()}
-        xyz, c, pixel = equirect_to_area_points(torch.where(sky[..., None], sky_col, col), d, caps, cap_rgb)
+        xyz, c, pixel = equirect_to_area_points(col_sky, d, caps, cap_rgb)
         n = normals.reshape(-1, 3)[pixel]
     else:
-        xyz, c = equirect_to_points(col, d)
+        xyz, c = equirect_to_points(col_sky, d)
         n = normals[torch.isfinite(d) & (d > 0)]
     counts = {"pf_dropped_fraction": round(float((~keep).double().mean()), 6)}
     for ld, lcol in layers:  # the layer continues a far surface seen head on from the centre: discs face it
