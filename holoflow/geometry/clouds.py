@@ -19,9 +19,10 @@ on its equirect grid:
    as an eye move of ``layer_baseline`` metres uncovers (holoflow/geometry/layers.py): each
    silhouette's own far side, and where a farther surface reaches under it, that one too; where the
    panorama shows sky, a sky dome behind everything (``sky_dome``): one coarse point per direction that
-   is not sky, just beyond the shell, coloured by the sky around it (``clean_sky``: the sky inside the
-   openings, never the rim a frame mixes in; the shell's and the layer's sky take it too), so that an eye
-   off the centre looking out of a window past its frame sees sky, never the void; before the dome,
+   is not sky but within ``sky_dome_reach_deg`` of it, just beyond the shell, coloured by the sky
+   around it (``clean_sky``: the sky inside the openings, never the rim a frame mixes in; the shell's
+   and the layer's sky take it too), so that an eye off the centre looking out of a window past its
+   frame sees sky, never the void; before the dome,
    the side of a window's recess and the frame that the wall's edge hides from the centre
    (``opening_reveals``, holoflow/geometry/openings.py), so that such an eye sees them, not the sky;
 6. sampled by area (``pf_sampling``; polar caps sampled finer where the panorama's poles hold detail:
@@ -192,7 +193,7 @@ def _pf_cloud(
         counts["pf_reveal"] = int(len(rxyz))
     dome_width = max(8, col.shape[1] // cfg.sky_dome_coarse)
     if cfg.sky_dome and bool(sky.any()):
-        dxyz, dc = sky_dome(sky_col, sky, shell * 1.05, dome_width)
+        dxyz, dc = sky_dome(sky_col, sky, shell * 1.05, dome_width, math.radians(cfg.sky_dome_reach_deg))
         xyz, c, n = _append((xyz, c, n), (dxyz, dc, -dxyz / torch.linalg.vector_norm(dxyz, dim=-1, keepdim=True)))
         counts["pf_dome"] = int(len(dxyz))
     return Cloud(xyz, _to_u8(c), n), {"counts": counts, "caps": caps, "polar_detail": detail, "dome_width": dome_width}
@@ -216,16 +217,26 @@ def clean_sky(rgb: torch.Tensor, sky: torch.Tensor, rim_px: int = SKY_RIM_PX) ->
     return fill_from(rgb, inside if bool(inside.any()) else sky)
 
 
-def sky_dome(rgb: torch.Tensor, sky: torch.Tensor, radius: float, width: int) -> tuple[torch.Tensor, torch.Tensor]:
+def sky_dome(
+    rgb: torch.Tensor, sky: torch.Tensor, radius: float, width: int, reach: float = math.pi
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The sky dome (module docstring, step 5) of an equirect grid rgb [H, W, C] that holds the sky's
     colour everywhere (``clean_sky``), whose sky is sky [H, W] (bool, at least one pixel): points xyz
     [M, 3] on a sphere of ``radius`` metres, one per pixel of a ``width`` x ``width // 2`` grid whose
-    direction the panorama does not see as sky, and their colour [M, C]."""
+    direction the panorama does not see as sky and lies within ``reach`` radians of a direction it
+    does, and their colour [M, C]."""
     h = max(1, width // 2)
     small = resize_equirect(torch.cat([rgb, sky[..., None].to(rgb.dtype)], -1).permute(2, 0, 1), h, width)
     small = small.permute(1, 2, 0)  # [h, w, C + 1]
+    dirs = equirect_directions(h, width, dtype=rgb.dtype)  # [h, w, 3]
     where = small[..., -1] < 0.999  # not all sky: the dome behind
-    dirs = equirect_directions(h, width, dtype=rgb.dtype)
+    if reach < math.pi:
+        seen = dirs[small[..., -1] > 0]  # [S, 3] directions with some sky
+        near = torch.zeros_like(where)
+        for chunk in torch.split(torch.nonzero(where), 4096):  # [c, 2] cells: the largest cosine to the sky
+            cos = (dirs[chunk[:, 0], chunk[:, 1]] @ seen.T).amax(1) if len(seen) else torch.zeros(len(chunk))
+            near[chunk[:, 0], chunk[:, 1]] = cos >= math.cos(reach)
+        where &= near
     return dirs[where] * radius, small[..., :-1][where]
 
 

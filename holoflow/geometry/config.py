@@ -148,6 +148,14 @@ class PointCloudParams(StageParams):
         "the centre shows sky past its frame",
     )
     sky_dome_coarse: int = param(8, "sky_dome: its grid is P_f's width divided by this", ge=1)
+    sky_dome_reach_deg: float = param(
+        30.0,
+        "sky_dome: only in directions within this angle of the sky (a window seen from 1 m off, 2 m away, "
+        "shows sky up to 27 deg past its frame); elsewhere a crack between two surfaces would show sky",
+        "deg",
+        gt=0,
+        le=180,
+    )
     layer_baseline: float = param(
         1.0,
         "P_f gets a background layer: the far surface (and the sky shell) "

@@ -1,6 +1,8 @@
 """The sky dome (holoflow/geometry/clouds.py): where a panorama shows sky, P_f gets coarse points behind
 everything in the directions that are not sky, coloured by the sky; none without sky."""
 
+import math
+
 import torch
 
 from holoflow.geometry.clouds import clean_sky, fill_from, point_clouds, sky_dome
@@ -72,3 +74,14 @@ def test_the_sky_behind_the_room_takes_the_sky_inside_the_window_not_its_rim():
     _, raw = sky_dome(fill_from(mixed, window), window, 10.0, 64)  # the rim taken as sky
     assert (raw - torch.tensor([0.5, 0.7, 0.9])).abs().amax() > 0.05
     assert torch.equal(clean_sky(rgb, torch.zeros_like(window)), rgb)  # no sky: nothing to clean
+
+
+def test_the_dome_stays_within_its_reach_of_the_sky():
+    """Behind a wall far from every window the dome would only show through cracks: none there."""
+    rgb, _, window = _room_with_window()  # the window: within 18 deg of straight ahead
+    xyz, _ = sky_dome(clean_sky(rgb, window), window, 10.0, 64, reach=math.radians(30))
+    cos = xyz[:, 2] / 10.0  # the cosine to straight ahead
+    assert len(xyz) > 0 and float(cos.min()) > math.cos(math.radians(18 + 30 + 6))  # + a dome cell
+    assert float(cos.max()) < 0.99
+    everywhere, _ = sky_dome(clean_sky(rgb, window), window, 10.0, 64)
+    assert len(everywhere) > 4 * len(xyz)
