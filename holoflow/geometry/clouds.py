@@ -20,9 +20,9 @@ on its equirect grid:
    silhouette's own far side, and where a farther surface reaches under it, that one too; where the
    panorama shows sky, a sky dome behind everything (``sky_dome``): one coarse point per direction that
    is not sky but within ``sky_dome_reach_deg`` of it, just beyond the shell, coloured by the sky
-   around it (``clean_sky``: the sky inside the openings, never the rim a frame mixes in; the shell's
-   and the layer's sky take it too), so that an eye off the centre looking out of a window past its
-   frame sees sky, never the void; before the dome,
+   around it (``clean_sky``: the sky inside the openings, never the rim a frame mixes in; the layer's
+   sky takes it too), so that an eye off the centre looking out of a window past its frame sees sky,
+   never the void; before the dome,
    the side of a window's recess and the frame that the wall's edge hides from the centre
    (``opening_reveals``, holoflow/geometry/openings.py), so that such an eye sees them, not the sky;
 6. sampled by area (``pf_sampling``; polar caps sampled finer where the panorama's poles hold detail:
@@ -143,7 +143,6 @@ def _pf_cloud(
     "dome_width"})."""
     d_open = torch.where(sky, torch.full_like(d, math.inf), d)  # the openings' sky, for their reveals
     sky_col = clean_sky(col, sky)  # [h, w, 3]: what lies unseen behind the room is sky, not its rims
-    col_sky = torch.where(sky[..., None], sky_col, col)  # the shell's points: the sky's colour
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
     d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise)
     normals = surface_normals(d, cfg.layer_tol)  # [h, w, 3]
@@ -151,7 +150,7 @@ def _pf_cloud(
     layers = []
     if cfg.layer_baseline > 0:  # the far sides continued under the silhouettes: each its own, then the farthest
         args = (
-            col_sky,
+            torch.where(sky[..., None], sky_col, col),  # the layer's sky: the sky's colour
             d,
             keep,
             cfg.layer_baseline,
@@ -175,10 +174,10 @@ def _pf_cloud(
             cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)
             caps, detail = called_for(caps, cap_rgb, col.shape[1], cfg.pf_polar_detail)
             detail = {k: float(f"{v:.4g}") for k, v in detail.items()}
-        xyz, c, pixel = equirect_to_area_points(col_sky, d, caps, cap_rgb)
+        xyz, c, pixel = equirect_to_area_points(col, d, caps, cap_rgb)
         n = normals.reshape(-1, 3)[pixel]
     else:
-        xyz, c = equirect_to_points(col_sky, d)
+        xyz, c = equirect_to_points(col, d)
         n = normals[torch.isfinite(d) & (d > 0)]
     counts = {"pf_dropped_fraction": round(float((~keep).double().mean()), 6)}
     for ld, lcol in layers:  # the layer continues a far surface seen head on from the centre: discs face it
@@ -200,7 +199,7 @@ def _pf_cloud(
 
 
 def clean_sky(rgb: torch.Tensor, sky: torch.Tensor, rim_px: int = SKY_RIM_PX) -> torch.Tensor:
-    """Every pixel of an equirect grid rgb [H, W, C] given the colour of the sky [H, W] (bool) nearest to
+    """Every pixel of an equirect grid rgb [H, W, C] given the colour of the sky [H, W] (bool) around
     it, from the sky's pixels more than ``rim_px`` px from anything else (``fill_from``): the rim a frame
     or a bar shares with the sky mixes in their colour, which on the unseen sky behind them (the layer,
     the dome) would draw ghost frames and grey panes. Sky too thin to have an inside keeps its own
