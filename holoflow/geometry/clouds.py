@@ -230,11 +230,10 @@ def sky_dome(
     dirs = equirect_directions(h, width, dtype=rgb.dtype)  # [h, w, 3]
     where = small[..., -1] < 0.999  # not all sky: the dome behind
     if reach < math.pi:
-        seen = dirs[small[..., -1] > 0]  # [S, 3] directions with some sky
+        seen = dirs[small[..., -1] > 0]  # [S, 3] directions with some sky (the filter keeps every sky pixel's)
         near = torch.zeros_like(where)
         for chunk in torch.split(torch.nonzero(where), 4096):  # [c, 2] cells: the largest cosine to the sky
-            cos = (dirs[chunk[:, 0], chunk[:, 1]] @ seen.T).amax(1) if len(seen) else torch.zeros(len(chunk))
-            near[chunk[:, 0], chunk[:, 1]] = cos >= math.cos(reach)
+            near[chunk[:, 0], chunk[:, 1]] = (dirs[chunk[:, 0], chunk[:, 1]] @ seen.T).amax(1) >= math.cos(reach)
         where &= near
     return dirs[where] * radius, small[..., :-1][where]
 
