@@ -63,7 +63,10 @@ def find_planes(points: np.ndarray, normals: np.ndarray, weight: np.ndarray, axe
     weights [N] (summing to the panorama's share): along each axis, the heaviest offset (a histogram
     peak) whose pixels within ``tol`` (relative) carry ``MIN_SUPPORT``, its offset the weighted median of
     those pixels; taken greedily, the pixels of each plane removed before the next, at most
-    ``MAX_PLANES``."""
+    ``MAX_PLANES``. A plane that is ``curved`` is dropped, except a floor (horizontal, below the eye):
+    seen from the eye its far pixels are the grazing ones, whose normals a network's noise tilts the
+    most, so under a smooth bias its leaning pixels sit a few per cent off its facing ones although it
+    is flat."""
     cos_lim = np.cos(np.radians(NORMAL_DEG))
     free = np.ones(len(points), bool)
     planes = []
@@ -95,7 +98,8 @@ def find_planes(points: np.ndarray, normals: np.ndarray, weight: np.ndarray, axe
         on = free & (np.abs(normals @ axis) > cos_lim) & (np.abs(s / offset - 1.0) < tol)
         support = float(weight[on].sum())
         free &= ~on
-        if support < MIN_SUPPORT or curved(s[on], np.abs(normals[on] @ axis), weight[on]):
+        floor = axis[1] > 0.9 and offset > 0  # a floor is flat: a network's bias bends it, nothing else does
+        if support < MIN_SUPPORT or (not floor and curved(s[on], np.abs(normals[on] @ axis), weight[on])):
             continue
         planes.append((axis, float(offset), support))
     return planes

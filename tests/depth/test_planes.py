@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from holoflow.depth.planes import refine_with_planes, room_axes, wanted
+from holoflow.depth.planes import curved, find_planes, refine_with_planes, room_axes, wanted
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.geometry.surfaces import surface_normals
 
@@ -124,3 +124,32 @@ def test_a_round_wall_is_not_flattened():
     out, facts = refine_with_planes(t)
     assert sorted(round(p["offset"], 3) for p in facts["planes"]) == [-1.2, 1.5]
     assert abs_rel(out, t) < 1e-3
+
+
+def grazing_plane(height: float, n: int = 400) -> tuple:
+    """Points [n, 3], unit normals [n, 3] and weights [n] of a horizontal plane ``height`` below the eye
+    (+y down; negative: above) as a network leaves it: its far, grazing half tilted 18 deg by pixel noise
+    and pushed 4 % farther by a smooth bias, its near half facing the eye where it truly is."""
+    rng = np.random.default_rng(0)
+    phi = rng.uniform(0, 2 * np.pi, n)
+    far = np.arange(n) >= n // 2
+    r = np.where(far, rng.uniform(3.0, 8.0, n), rng.uniform(0.5, 2.0, n))  # horizontal distance, metres
+    bias = np.where(far, 1.04, 1.0)
+    pts = np.stack([r * np.cos(phi), np.full(n, height), r * np.sin(phi)], -1) * bias[:, None]
+    tilt = np.radians(np.where(far, 18.0, 0.0))
+    normals = np.stack([np.sin(tilt) * np.cos(phi), np.cos(tilt) * np.sign(height), np.sin(tilt) * np.sin(phi)], -1)
+    return pts, normals, np.full(n, 0.2 / n)
+
+
+@pytest.mark.parametrize("height,kept", [(1.6, True), (-1.2, False)])
+def test_a_floor_bent_by_a_bias_is_still_the_floor(height, kept):
+    """A network's floor leans and lies farther where it is seen grazing, which the curvature test
+    reads as a dome; a floor is flat, so it stays a plane, and the ceiling the same bias bends (a vault
+    looks just so) is dropped."""
+    pts, normals, w = grazing_plane(height)
+    axes = room_axes(normals, w, yaw=0.0)
+    assert curved((pts @ axes[0]), np.abs(normals @ axes[0]), w)  # the test would drop either
+    planes = find_planes(pts, normals, w, axes, tol=0.1)
+    assert (len(planes) == 1) is kept
+    if kept:
+        assert planes[0][0][1] == 1.0 and abs(planes[0][1] / height - 1) < 0.05
