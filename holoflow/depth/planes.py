@@ -28,13 +28,6 @@ MIN_CONTACTS = 20
 #: narrower panoramas are not refined: a step's blur, a ramp and a plane's curvature are a pixel or two
 #: apart there, and no window tells them apart
 MIN_WIDTH = 256
-#: the seams' equations are solved by iteratively reweighted least squares (``ROBUST_ITERS`` passes of
-#: Tukey's biweight, ``TUKEY_C``) on their residuals, whose robust scale is taken as at least
-#: ``SEAM_NOISE`` (log offset): a network's seams scatter by a few per cent, and now and then one by
-#: ten or more
-ROBUST_ITERS = 6
-TUKEY_C = 4.685
-SEAM_NOISE = 0.01
 #: relative offset between a plane's leaning and facing pixels beyond which it is a curved surface
 CURVED = 0.02
 #: the planes must cover this share of the sphere for the scene to be a room (else nothing is changed)
@@ -177,11 +170,10 @@ def contact_offsets(
     corner, not an occluding edge). A network's bias is smooth, so at a seam it is the same on both
     sides, and the measured depths there have the ratio of the true offsets: each pair of planes that
     touch at ``MIN_CONTACTS`` pixel pairs or more gives one equation (the median over its contacts) for
-    the log of that ratio, and all offsets are solved at once by robust least squares
-    (``solve_offsets``: a seam whose equation is far off the others weighs little); a plane the
-    solution moves by more than ``tol`` from its fit is dropped and the rest solved again. This is how
-    a room layout is read: positions from where the edges are in the image, which a low-frequency bias
-    does not move. Returns the offsets [P] and each plane's number of
+    the log of that ratio, and all offsets are solved at once by weighted least squares
+    (``_solve_offsets``); a plane the solution moves by more than ``tol`` from its fit is dropped and the
+    rest solved again. This is how a room layout is read: positions from where the edges are in the
+    image, which a low-frequency bias does not move. Returns the offsets [P] and each plane's number of
     contacts in the solution ([P], 0: kept as fitted)."""
     offsets = [p[1] for p in planes]
     count = [0] * len(planes)
@@ -222,7 +214,7 @@ def contact_offsets(
     fitted = np.log(np.abs([p[1] for p in planes]))
     free_planes = set(range(len(planes))) - {ground}
     for _ in range(len(planes)):  # solve; drop planes the contacts move by more than tol; solve again
-        x, reached = solve_offsets(edges, len(planes), ground, fitted[ground], free_planes)
+        x, reached = _solve_offsets(edges, len(planes), ground, fitted[ground], free_planes)
         bad = {i for i in reached if i != ground and abs(x[i] - fitted[i]) > np.log1p(tol)}
         if not bad:
             break
@@ -234,11 +226,10 @@ def contact_offsets(
     return offsets, count
 
 
-def solve_offsets(edges: list, n: int, ground: int, x_ground: float, free: set) -> tuple[np.ndarray, set]:
-    """Log offsets [n] from the contact equations ``edges`` (i, j, log|s_i| - log|s_j|, contacts) by
-    least squares weighted by sqrt(contacts) and reweighted by Tukey's biweight of each equation's
-    residual (``ROBUST_ITERS``), ``ground`` held at ``x_ground``; only the planes of ``free`` linked to
-    the ground through the equations are solved (the set returned, ground included)."""
+def _solve_offsets(edges: list, n: int, ground: int, x_ground: float, free: set) -> tuple[np.ndarray, set]:
+    """Log offsets [n] from the contact equations ``edges`` (i, j, log|s_i| - log|s_j|, weight) by
+    weighted least squares, ``ground`` held at ``x_ground``; only the planes of ``free`` linked to the
+    ground through the equations are solved (the set returned, ground included)."""
     reached, grow = {ground}, True
     while grow:
         grow = False
@@ -267,12 +258,7 @@ def solve_offsets(edges: list, n: int, ground: int, x_ground: float, free: set) 
         rhs.append(b)
         w.append(np.sqrt(cnt))
     A, b, w = np.array(rows), np.array(rhs), np.array(w)
-    weight = w
-    for _ in range(ROBUST_ITERS):  # Tukey's biweight on the equations' residuals: a bad seam weighs little
-        sol, *_ = np.linalg.lstsq(A * weight[:, None], b * weight, rcond=None)
-        r = A @ sol - b
-        scale = max(1.4826 * float(np.median(np.abs(r))), SEAM_NOISE)
-        weight = w * np.maximum(np.clip(1 - (r / (TUKEY_C * scale)) ** 2, 0, None) ** 2, 1e-3)
+    sol, *_ = np.linalg.lstsq(A * w[:, None], b * w, rcond=None)
     x[unknown] = sol
     return x, reached
 
