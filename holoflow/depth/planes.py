@@ -98,7 +98,7 @@ def find_planes(points: np.ndarray, normals: np.ndarray, weight: np.ndarray, axe
         on = free & (np.abs(normals @ axis) > cos_lim) & (np.abs(s / offset - 1.0) < tol)
         support = float(weight[on].sum())
         free &= ~on
-        floor = axis[1] > 0.9 and offset > 0  # a floor is flat: a network's bias bends it, nothing else does
+        floor = axis[1] > 0.9 and offset > 0  # horizontal, below the eye: flat, whatever its depth's bias
         if support < MIN_SUPPORT or (not floor and curved(s[on], np.abs(normals[on] @ axis), weight[on])):
             continue
         planes.append((axis, float(offset), support))

@@ -148,7 +148,7 @@ def test_a_floor_bent_by_a_bias_is_still_the_floor(height, kept):
     looks just so) is dropped."""
     pts, normals, w = grazing_plane(height)
     axes = room_axes(normals, w, yaw=0.0)
-    assert curved((pts @ axes[0]), np.abs(normals @ axes[0]), w)  # the test would drop either
+    assert curved(pts @ axes[0], np.abs(normals @ axes[0]), w)  # the curvature test alone drops either
     planes = find_planes(pts, normals, w, axes, tol=0.1)
     assert (len(planes) == 1) is kept
     if kept:
