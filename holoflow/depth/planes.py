@@ -98,11 +98,18 @@ def find_planes(points: np.ndarray, normals: np.ndarray, weight: np.ndarray, axe
         on = free & (np.abs(normals @ axis) > cos_lim) & (np.abs(s / offset - 1.0) < tol)
         support = float(weight[on].sum())
         free &= ~on
-        floor = axis[1] > 0.9 and offset > 0  # horizontal, below the eye: flat, whatever its depth's bias
-        if support < MIN_SUPPORT or (not floor and curved(s[on], np.abs(normals[on] @ axis), weight[on])):
+        if support < MIN_SUPPORT or (
+            not is_floor(axis, offset) and curved(s[on], np.abs(normals[on] @ axis), weight[on])
+        ):
             continue
         planes.append((axis, float(offset), support))
     return planes
+
+
+def is_floor(axis: np.ndarray, offset: float) -> bool:
+    """Whether the plane p . axis = offset (metres) is a floor: horizontal (the vertical axis, +y down)
+    and below the eye."""
+    return bool(axis[1] > 0.9 and offset > 0)
 
 
 def curved(offsets: np.ndarray, cos_to_axis: np.ndarray, weight: np.ndarray) -> bool:
@@ -301,7 +308,7 @@ def refine_with_planes(
     if sum(p[2] for p in planes) < MIN_ROOM:  # not a room: an open scene, or curved surfaces
         return depth, {"planes": [], "on_planes": 0.0, "note": f"planes cover under {MIN_ROOM:.0%}: not a room"}
     ratio, which = plane_depth_ratio(dirs, depth, normals, planes, tol)
-    floors = [i for i, p in enumerate(planes) if p[0][1] > 0.9 and p[1] > 0]
+    floors = [i for i, p in enumerate(planes) if is_floor(p[0], p[1])]
     fitted, contacts = [p[1] for p in planes], [0] * len(planes)
     if floors:
         offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol)
