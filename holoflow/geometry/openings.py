@@ -102,6 +102,7 @@ def opening_reveals(
     max_depth: float = 0.6,
     bar_px: int = 3,
     frame_px: int = 16,
+    recess_reach: float = 0.25,
 ) -> tuple[torch.Tensor, torch.Tensor, dict]:
     """Points where a window's recess hides from the centre: the side the wall's edge hides, and the
     strip of the window behind that edge. A window sits back from its wall; from the centre one side of
@@ -116,9 +117,13 @@ def opening_reveals(
        the 90th percentile of those between 2 cm (or 1 % of their distance) and ``max_depth`` metres
        (the wall around the window), and the pixels that touch the sky within a quarter of D are the
        wall's edge on the hidden side (the visible side's recess meets the window's frame, well under D);
+       that edge is followed past the sky, within ``recess_reach`` x the window's size, along the pixels
+       within a quarter of D that border one less than D / 2 in front of the plane: a recess taller than
+       its panes hides its side over its whole height (``_along_the_recess``);
     3. sweeps each such edge pixel straight back to the window's plane along its normal (the hidden
        side), then along the plane away from the edge, as far as the frame is wide where the centre sees
-       it (``_frame_width``, at most ``frame_px`` pixels): the frame the edge hides;
+       it (``_frame_width``, within ``ring_px`` + 2 px of the panes' box, at most ``frame_px`` pixels):
+       the frame the edge hides;
     4. spaces the points ``spacing_rad`` x the edge's distance apart (P_f's spacing) and colours them
        with the median colour of the recess's sides the centre sees (else of the wall's edge).
 
@@ -138,7 +143,7 @@ def opening_reveals(
     # a window's panes are one opening: close the sky over its bars (up to 2 bar_px + 1 wide)
     closed = cv2.morphologyEx(sky.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((2 * bar_px + 1,) * 2, np.uint8))
     dirs = None
-    for (y0, y1, x0, x1), window in _openings(closed.astype(bool), max_fraction, ring_px + 2):
+    for (y0, y1, x0, x1), window in _openings(closed.astype(bool), max_fraction, ring_px + 2, grow=recess_reach):
         solid = ~sky[y0:y1, x0:x1]
         comp, bars = window & ~solid, window & solid  # the window's sky, and its bars
         ring = _dilate(window, ring_px) & solid  # its bars and frame
@@ -159,17 +164,24 @@ def opening_reveals(
         if recessed.sum() < 8:
             continue
         depth_w = float(np.quantile(front[recessed], 0.9))  # the recess's depth: where its wall stands
-        jamb = edge & recessed & (np.abs(front - depth_w) < 0.25 * depth_w)  # the wall's edge at the sky
+        at_wall = solid & (np.abs(front - depth_w) < 0.25 * depth_w)  # [h, w] the wall around the window
+        jamb = edge & recessed & at_wall  # the wall's edge at the sky
         face = recessed & ~edge & (front < 0.75 * depth_w)  # the recess's sides seen beyond the sky's rim
         if face.sum() < 4:  # none seen: the wall's own edge
             face = recessed & ~edge
         if jamb.sum() < 8 or face.sum() < 4:
             continue
-        edge_xyz, ray = xyz[jamb], u[jamb]  # [J, 3]
+        jamb = _along_the_recess(jamb, at_wall & _dilate(~solid | (front < 0.5 * depth_w), 1))
+        edge_xyz = xyz[jamb]  # [J, 3]
         back = edge_xyz + front[jamb][:, None] * normal  # [J, 3] where the reveal meets the window's plane
-        behind = ray * (offset / np.maximum(ray @ normal, 1e-6))[:, None]  # [J, 3] the plane behind the edge
-        behind = back + _clip_length(behind - back, _frame_width(window, solid, front, dd, spacing_rad, frame_px))
-        step = spacing_rad * dd[jamb]  # [J] metres between points: P_f's own spacing at the edge
+        hidden = _behind_what_was_seen(0.5 * (edge_xyz + back), d)  # [J] a side the centre sees is not hidden
+        edge_xyz, back, ray = edge_xyz[hidden], back[hidden], u[jamb][hidden]
+        if len(ray) == 0:
+            continue
+        hit = ray * (offset / np.maximum(ray @ normal, 1e-6))[:, None]  # [J, 3] the plane behind the edge
+        framed = solid & _box_around(window, ring_px + 2)  # the frame measured near the panes only
+        behind = back + _clip_length(hit - back, _frame_width(window, framed, front, dd, spacing_rad, frame_px))
+        step = spacing_rad * dd[jamb][hidden]  # [J] metres between points: P_f's own spacing at the edge
         colour = np.median(col[y0:y1, x0:x1][face], 0)  # [3]
         for a, b in ((edge_xyz, back), (back, behind)):  # the reveal, then the window's plane it hides
             new = _segments(a, b, step)
@@ -181,10 +193,11 @@ def opening_reveals(
     return torch.from_numpy(xyz_all), torch.from_numpy(rgb_all).to(srgb.dtype), found
 
 
-def _openings(sky: np.ndarray, max_fraction: float, pad: int):
+def _openings(sky: np.ndarray, max_fraction: float, pad: int, grow: float = 0.0):
     """The openings of a sky mask [H, W]: its 8-connected regions of 16 px or more, at most
     ``max_fraction`` of the panorama, touching neither pole row. Yields ((y0, y1, x0, x1) the region's
-    box grown by ``pad`` px within the panorama, the region's mask [y1 - y0, x1 - x0] in that box)."""
+    box grown by ``pad`` px plus ``grow`` x its longer side within the panorama, the region's mask
+    [y1 - y0, x1 - x0] in that box)."""
     import cv2
 
     H, W = sky.shape
@@ -193,8 +206,42 @@ def _openings(sky: np.ndarray, max_fraction: float, pad: int):
         x, y, w, h, area = (int(v) for v in boxes[i])
         if area < 16 or area > max_fraction * H * W or y == 0 or y + h == H:
             continue
-        y0, y1, x0, x1 = max(0, y - pad), min(H, y + h + pad), max(0, x - pad), min(W, x + w + pad)
+        p = pad + round(grow * max(w, h))
+        y0, y1, x0, x1 = max(0, y - p), min(H, y + h + p), max(0, x - p), min(W, x + w + p)
         yield (y0, y1, x0, x1), labels[y0:y1, x0:x1] == i
+
+
+def _box_around(mask: np.ndarray, pad: int) -> np.ndarray:
+    """The bounding box of mask [h, w] grown by pad px, as a mask [h, w]."""
+    ys, xs = np.nonzero(mask)
+    box = np.zeros_like(mask)
+    box[max(0, ys.min() - pad) : ys.max() + pad + 1, max(0, xs.min() - pad) : xs.max() + pad + 1] = True
+    return box
+
+
+def _behind_what_was_seen(points: np.ndarray, depth: np.ndarray, tol: float = 0.01) -> np.ndarray:
+    """Whether each of points [N, 3] (metres) lies more than ``tol`` (relative) behind what the centre
+    sees in its direction (depth [H, W] radial metres, non-finite = sky: nothing is behind the sky)."""
+    from holoflow.geometry.sampling import sample_equirect
+
+    p = torch.from_numpy(points)
+    seen = sample_equirect(torch.from_numpy(depth)[None], p, "nearest")[:, 0].numpy()  # [N]
+    return np.linalg.norm(points, axis=-1) > seen * (1 + tol)
+
+
+def _along_the_recess(jamb: np.ndarray, drop: np.ndarray) -> np.ndarray:
+    """The wall's edge on the recess's hidden side, followed past the sky: the pixels of drop [h, w] (at
+    the wall's depth, beside a pixel far behind it: the window's plane or the sky) 8-connected to the
+    edge at the sky, jamb [h, w]. A recess taller than its panes (a niche, a panel above the window)
+    hides its side over its whole height, not only beside the sky; a depth edge elsewhere in the box (a
+    plant before the sill) is not connected to it and stays out."""
+    import cv2
+
+    n, labels = cv2.connectedComponents((drop | jamb).astype(np.uint8), connectivity=8)
+    keep = np.zeros(n, bool)
+    keep[np.unique(labels[jamb])] = True
+    keep[0] = False
+    return keep[labels]
 
 
 def _frame_width(

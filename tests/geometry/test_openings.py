@@ -121,11 +121,15 @@ WALL, PANE = 2.0, 2.4
 WALL_GREY, REVEAL_GREY, BAR_GREY = 0.3, 0.55, 0.8
 
 
-def _recessed_window():
+def _recessed_window(niche: tuple[float, float] | None = None):
     """Ray cast of the recessed window from the centre: srgb [RH, RW, 3], radial depth [RH, RW] (sky inf;
-    elsewhere a 3 m sphere)."""
+    elsewhere a 3 m sphere). niche (top, bottom y): the recess runs that far up and down, past the
+    panes, with a panel in the window's plane above and below them."""
     u = equirect_directions(RH, RW, dtype=torch.float64)  # [RH, RW, 3]
     x0, x1, y0, y1 = HOLE
+    py0, py1 = y0, y1  # the panes
+    if niche is not None:
+        y0, y1 = niche
     depth = torch.full((RH, RW), 3.0, dtype=torch.float64)
     rgb = torch.full((RH, RW, 3), WALL_GREY, dtype=torch.float64)
     ahead = u[..., 2] > 0.2
@@ -135,13 +139,14 @@ def _recessed_window():
     depth[ahead & ~in_hole] = t_wall[ahead & ~in_hole]
     t_pane = PANE / u[..., 2].clamp_min(1e-6)
     q = u * t_pane[..., None]
-    through = in_hole & (q[..., 0] > x0) & (q[..., 0] < x1) & (q[..., 1] > y0) & (q[..., 1] < y1)
+    back = in_hole & (q[..., 0] > x0) & (q[..., 0] < x1) & (q[..., 1] > y0) & (q[..., 1] < y1)
+    through = back & (q[..., 1] > py0) & (q[..., 1] < py1)
     bar = through & (((q[..., 0] - 0.65).abs() < 0.02) | ((q[..., 1] - 0.05).abs() < 0.02))
     depth[through] = float("inf")
-    depth[bar] = t_pane[bar]
+    depth[bar | (back & ~through)] = t_pane[bar | (back & ~through)]
     rgb[through] = torch.tensor([0.7, 0.8, 0.95], dtype=torch.float64)
-    rgb[bar] = BAR_GREY
-    side = in_hole & ~through  # the ray meets a side of the recess
+    rgb[bar | (back & ~through)] = BAR_GREY
+    side = in_hole & ~back  # the ray meets a side of the recess
     t_side = torch.full((RH, RW), float("inf"), dtype=torch.float64)
     for axis, value in ((0, x0), (0, x1), (1, y0), (1, y1)):
         t = value / torch.where(u[..., axis].abs() > 1e-9, u[..., axis], torch.full_like(t_side, 1e-9))
@@ -176,7 +181,34 @@ def test_the_recess_side_the_wall_hides_gets_points_and_nothing_else_does():
     r = torch.linalg.vector_norm(xyz, dim=-1)
     from holoflow.geometry.sampling import sample_equirect
 
-    seen = sample_equirect(depth[None], xyz / r[:, None], "nearest")[0]
+    seen = sample_equirect(depth[None], xyz / r[:, None], "nearest")[:, 0]  # [R]
+    assert bool((r >= seen * (1 - 1e-6)).all())
+
+
+def test_a_recess_taller_than_its_panes_has_its_hidden_side_whole():
+    from holoflow.geometry.openings import opening_reveals
+
+    top, bottom = -0.5, 0.6  # the recess runs 0.2 m past the panes either way, a panel above and below them
+    rgb, depth = _recessed_window(niche=(top, bottom))
+    spacing = 2 * torch.pi / RW
+    xyz, _, found = opening_reveals(rgb, depth, spacing)
+    assert found["reveals"] == 1
+    x0 = HOLE[0]
+    tol = 2 * spacing * PANE
+    on_side = ((xyz[:, 0] - x0).abs() < tol) & (xyz[:, 2] > WALL - tol) & (xyz[:, 2] < PANE + tol)
+    behind_edge = ((xyz[:, 2] - PANE).abs() < tol) & (xyz[:, 0] > x0 - tol) & (xyz[:, 0] < x0 + 0.25)
+    assert bool((on_side | behind_edge).all())
+    assert bool(((xyz[:, 1] > top - tol) & (xyz[:, 1] < bottom + tol)).all())
+    # the hidden side is covered over the recess's height, the panel's stretches included
+    ys, zs = torch.meshgrid(
+        torch.linspace(top + 0.05, bottom - 0.05, 16), torch.linspace(WALL + 0.05, PANE - 0.05, 6), indexing="ij"
+    )
+    side = torch.stack([torch.full_like(ys, x0), ys, zs], -1).reshape(-1, 3).double()
+    assert float(torch.cdist(side, xyz).min(1).values.max()) < tol
+    r = torch.linalg.vector_norm(xyz, dim=-1)
+    from holoflow.geometry.sampling import sample_equirect
+
+    seen = sample_equirect(depth[None], xyz / r[:, None], "nearest")[:, 0]  # [R]
     assert bool((r >= seen * (1 - 1e-6)).all())
 
 
