@@ -121,9 +121,10 @@ def opening_reveals(
        within a quarter of D that border one less than D / 2 in front of the plane: a recess taller than
        its panes hides its side over its whole height (``_along_the_recess``);
     3. sweeps each such edge pixel straight back to the window's plane along its normal (the hidden
-       side), then along the plane away from the edge, as far as the frame is wide where the centre sees
-       it (``_frame_width``, within ``ring_px`` + 2 px of the panes' box, at most ``frame_px`` pixels):
-       the frame the edge hides;
+       side; a pixel whose sweep the centre sees, a side facing it, is left out: ``_behind_what_was_seen``
+       at the sweep's middle), then along the plane away from the edge, as far as the frame is wide where
+       the centre sees it (``_frame_width``, within ``ring_px`` + 2 px of the panes' box, at most
+       ``frame_px`` pixels): the frame the edge hides;
     4. spaces the points ``spacing_rad`` x the edge's distance apart (P_f's spacing) and colours them
        with the median colour of the recess's sides the centre sees (else of the wall's edge).
 
