@@ -173,16 +173,16 @@ def opening_reveals(
         if jamb.sum() < 8 or face.sum() < 4:
             continue
         jamb = _along_the_recess(jamb, at_wall & _dilate(~solid | (front < 0.5 * depth_w), 1))
-        edge_xyz = xyz[jamb]  # [J, 3]
-        back = edge_xyz + front[jamb][:, None] * normal  # [J, 3] where the reveal meets the window's plane
-        hidden = _behind_what_was_seen(0.5 * (edge_xyz + back), d)  # [J] a side the centre sees is not hidden
-        edge_xyz, back, ray = edge_xyz[hidden], back[hidden], u[jamb][hidden]
-        if len(ray) == 0:
+        middle = xyz[jamb] + 0.5 * front[jamb][:, None] * normal  # [J, 3] halfway back to the window's plane
+        jamb[jamb] = _behind_what_was_seen(middle, d)  # a side the centre sees is not hidden
+        if not jamb.any():
             continue
+        edge_xyz, ray = xyz[jamb], u[jamb]  # [J, 3]
+        back = edge_xyz + front[jamb][:, None] * normal  # [J, 3] where the reveal meets the window's plane
         hit = ray * (offset / np.maximum(ray @ normal, 1e-6))[:, None]  # [J, 3] the plane behind the edge
         framed = solid & _box_around(window, ring_px + 2)  # the frame measured near the panes only
         behind = back + _clip_length(hit - back, _frame_width(window, framed, front, dd, spacing_rad, frame_px))
-        step = spacing_rad * dd[jamb][hidden]  # [J] metres between points: P_f's own spacing at the edge
+        step = spacing_rad * dd[jamb]  # [J] metres between points: P_f's own spacing at the edge
         colour = np.median(col[y0:y1, x0:x1][face], 0)  # [3]
         for a, b in ((edge_xyz, back), (back, behind)):  # the reveal, then the window's plane it hides
             new = _segments(a, b, step)

@@ -157,32 +157,40 @@ def _recessed_window(niche: tuple[float, float] | None = None):
     return rgb, depth
 
 
-def test_the_recess_side_the_wall_hides_gets_points_and_nothing_else_does():
-    from holoflow.geometry.openings import opening_reveals
+def _assert_the_hidden_side_alone(xyz, depth, top: float, bottom: float, rows: int):
+    """The reveal points xyz [R, 3] of ``_recessed_window``: only on its hidden side (x = HOLE's x0) and
+    the window's plane behind that edge, between heights top and bottom, covering that side (``rows`` x 6
+    samples of it each within two of P_f's steps of a point), and none in front of what the centre saw
+    (depth [RH, RW])."""
+    from holoflow.geometry.sampling import sample_equirect
 
-    rgb, depth = _recessed_window()
     spacing = 2 * torch.pi / RW
-    xyz, colour, found = opening_reveals(rgb, depth, spacing)
-    assert found["reveals"] == 1 and found["reveal_points"] == len(xyz) > 50
-    x0, x1, y0, y1 = HOLE
+    x0 = HOLE[0]
     tol = 2 * spacing * PANE  # two of P_f's steps at the window
     on_side = ((xyz[:, 0] - x0).abs() < tol) & (xyz[:, 2] > WALL - tol) & (xyz[:, 2] < PANE + tol)
     behind_edge = ((xyz[:, 2] - PANE).abs() < tol) & (xyz[:, 0] > x0 - tol) & (xyz[:, 0] < x0 + 0.25)
     assert bool((on_side | behind_edge).all())  # only on the hidden side and the window's plane behind it
-    assert bool(((xyz[:, 1] > y0 - tol) & (xyz[:, 1] < y1 + tol)).all())
+    assert bool(((xyz[:, 1] > top - tol) & (xyz[:, 1] < bottom + tol)).all())
     # the hidden side is covered: every point of it has a reveal point within two steps
     ys, zs = torch.meshgrid(
-        torch.linspace(y0 + 0.05, y1 - 0.05, 12), torch.linspace(WALL + 0.05, PANE - 0.05, 6), indexing="ij"
+        torch.linspace(top + 0.05, bottom - 0.05, rows), torch.linspace(WALL + 0.05, PANE - 0.05, 6), indexing="ij"
     )
     side = torch.stack([torch.full_like(ys, x0), ys, zs], -1).reshape(-1, 3).double()
     assert float(torch.cdist(side, xyz).min(1).values.max()) < tol
-    assert torch.allclose(colour, torch.full_like(colour, REVEAL_GREY), atol=0.02)  # the recess's own colour
     # none of them is in front of what the centre saw
     r = torch.linalg.vector_norm(xyz, dim=-1)
-    from holoflow.geometry.sampling import sample_equirect
-
     seen = sample_equirect(depth[None], xyz / r[:, None], "nearest")[:, 0]  # [R]
     assert bool((r >= seen * (1 - 1e-6)).all())
+
+
+def test_the_recess_side_the_wall_hides_gets_points_and_nothing_else_does():
+    from holoflow.geometry.openings import opening_reveals
+
+    rgb, depth = _recessed_window()
+    xyz, colour, found = opening_reveals(rgb, depth, 2 * torch.pi / RW)
+    assert found["reveals"] == 1 and found["reveal_points"] == len(xyz) > 50
+    _assert_the_hidden_side_alone(xyz, depth, HOLE[2], HOLE[3], rows=12)
+    assert torch.allclose(colour, torch.full_like(colour, REVEAL_GREY), atol=0.02)  # the recess's own colour
 
 
 def test_a_recess_taller_than_its_panes_has_its_hidden_side_whole():
@@ -190,26 +198,9 @@ def test_a_recess_taller_than_its_panes_has_its_hidden_side_whole():
 
     top, bottom = -0.5, 0.6  # the recess runs 0.2 m past the panes either way, a panel above and below them
     rgb, depth = _recessed_window(niche=(top, bottom))
-    spacing = 2 * torch.pi / RW
-    xyz, _, found = opening_reveals(rgb, depth, spacing)
+    xyz, _, found = opening_reveals(rgb, depth, 2 * torch.pi / RW)
     assert found["reveals"] == 1
-    x0 = HOLE[0]
-    tol = 2 * spacing * PANE
-    on_side = ((xyz[:, 0] - x0).abs() < tol) & (xyz[:, 2] > WALL - tol) & (xyz[:, 2] < PANE + tol)
-    behind_edge = ((xyz[:, 2] - PANE).abs() < tol) & (xyz[:, 0] > x0 - tol) & (xyz[:, 0] < x0 + 0.25)
-    assert bool((on_side | behind_edge).all())
-    assert bool(((xyz[:, 1] > top - tol) & (xyz[:, 1] < bottom + tol)).all())
-    # the hidden side is covered over the recess's height, the panel's stretches included
-    ys, zs = torch.meshgrid(
-        torch.linspace(top + 0.05, bottom - 0.05, 16), torch.linspace(WALL + 0.05, PANE - 0.05, 6), indexing="ij"
-    )
-    side = torch.stack([torch.full_like(ys, x0), ys, zs], -1).reshape(-1, 3).double()
-    assert float(torch.cdist(side, xyz).min(1).values.max()) < tol
-    r = torch.linalg.vector_norm(xyz, dim=-1)
-    from holoflow.geometry.sampling import sample_equirect
-
-    seen = sample_equirect(depth[None], xyz / r[:, None], "nearest")[:, 0]  # [R]
-    assert bool((r >= seen * (1 - 1e-6)).all())
+    _assert_the_hidden_side_alone(xyz, depth, top, bottom, rows=16)  # the panel's stretches included
 
 
 def test_a_window_flush_with_its_wall_and_an_open_sky_get_no_reveals():
