@@ -9,8 +9,10 @@ colour clamped to [0, 1]. Per ring (cameras.json ``ring``):
   ``ssim``: means of the per-view values;
 - ``abs_rel`` / ``delta1``: the render's depth (alpha-composited camera z / alpha) against the views'
   Z over the pixels whose truth is finite and whose alpha >= ``empty_alpha``: mean |z - z*| / z* and
-  the fraction with max(z / z*, z* / z) < 1.25; ``depth_coverage`` = the share of finite-truth pixels
-  that had a rendered depth;
+  the fraction with max(z / z*, z* / z) < 1.25; ``scale``: the median of z / z*, the scene's size against
+  the truth's (a run whose metric depth is 3 % too large renders every surface 3 % too far, and an eye
+  that steps 0.5 m walks through a room 3 % too big: it sees the walls slide); ``depth_coverage`` = the
+  share of finite-truth pixels that had a rendered depth;
 - ``empty``: fraction of pixels with alpha < ``empty_alpha`` (0.5); ``cracked``: alpha < ``crack_alpha``
   (0.9);
 - with the set's panorama (``pano_z.exr``): ``unseen``, the fraction of pixels whose surface the
@@ -57,20 +59,22 @@ def pooled_psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | N
 def depth_errors(
     depth: torch.Tensor, alpha: torch.Tensor, truth: torch.Tensor, empty_alpha: float = EMPTY_ALPHA
 ) -> dict:
-    """AbsRel and delta < 1.25 of rendered depth [V, H, W] (metres; camera z) against truth [V, H, W]
-    (camera z, +inf / NaN = no truth) over pixels with finite truth > 0 and alpha [V, H, W] >=
-    ``empty_alpha``; ``coverage`` = those pixels / finite-truth pixels. NaN where no pixel qualifies."""
+    """AbsRel, delta < 1.25 and scale (the median of z / z*) of rendered depth [V, H, W] (metres; camera z)
+    against truth [V, H, W] (camera z, +inf / NaN = no truth) over pixels with finite truth > 0 and alpha
+    [V, H, W] >= ``empty_alpha``; ``coverage`` = those pixels / finite-truth pixels. NaN where no pixel
+    qualifies."""
     t = truth.double()
     finite = torch.isfinite(t) & (t > 0)
     m = finite & (alpha >= empty_alpha) & (depth > 0)
     n = int(m.sum())
     if n == 0:
-        return dict(abs_rel=math.nan, delta1=math.nan, coverage=0.0, pixels=0)
+        return dict(abs_rel=math.nan, delta1=math.nan, scale=math.nan, coverage=0.0, pixels=0)
     d, g = depth.double()[m], t[m]
     ratio = torch.maximum(d / g, g / d)
     return dict(
         abs_rel=float(((d - g).abs() / g).mean()),
         delta1=float((ratio < DELTA).double().mean()),
+        scale=float((d / g).median()),
         coverage=n / max(int(finite.sum()), 1),
         pixels=n,
     )
@@ -236,7 +240,8 @@ def ring_table(scores: dict) -> list[str]:
     """The ring table as text lines: one row per ring."""
     head = (
         f"  {'ring':>6s} {'views':>5s} {'PSNR dB':>8s} {'mean':>7s} {'SSIM':>7s} {'AbsRel':>7s} {'d<1.25':>7s}"
-        f" {'empty %':>8s} {'a<0.9 %':>8s} {'unseen %':>8s} {'seen dB':>8s} {'unseen dB':>9s} {'pano dB':>8s}"
+        f" {'scale':>6s} {'empty %':>8s} {'a<0.9 %':>8s} {'unseen %':>8s} {'seen dB':>8s} {'unseen dB':>9s}"
+        f" {'pano dB':>8s}"
     )
     rows = [
         f"truth set {scores['truth']} ({scores['views']} views, {scores['size'][0]}x{scores['size'][1]} px); "
@@ -248,13 +253,15 @@ def ring_table(scores: dict) -> list[str]:
             f"  {key + ' m':>6s} {r['views']:5d} {_f(r['psnr'], '{:.2f}'):>8s}"
             f" {_f(r['psnr_mean'], '{:.2f}'):>7s} {_f(r['ssim'], '{:.4f}'):>7s}"
             f" {_f(r['abs_rel'], '{:.4f}'):>7s} {_f(r['delta1'], '{:.4f}'):>7s}"
-            f" {_f(100 * r['empty'], '{:.2f}'):>8s} {_f(100 * r['cracked'], '{:.2f}'):>8s}"
+            f" {_f(r.get('scale'), '{:.3f}'):>6s} {_f(100 * r['empty'], '{:.2f}'):>8s}"
+            f" {_f(100 * r['cracked'], '{:.2f}'):>8s}"
             f" {_f(_pct(r.get('unseen')), '{:.2f}'):>8s} {_f(r.get('psnr_seen'), '{:.2f}'):>8s}"
             f" {_f(r.get('psnr_unseen'), '{:.2f}'):>9s} {_f(r.get('psnr_panorama'), '{:.2f}'):>8s}"
         )
     rows.append(
-        "PSNR: pooled over the ring's pixels (mean: of the per-view values), sRGB; AbsRel / d<1.25: rendered "
-        f"camera z vs the views' Z (finite truth, alpha >= {EMPTY_ALPHA}); empty: alpha < {EMPTY_ALPHA}; "
+        "PSNR: pooled over the ring's pixels (mean: of the per-view values), sRGB; AbsRel / d<1.25 / scale "
+        f"(median z / Z): rendered camera z vs the views' Z (finite truth, alpha >= {EMPTY_ALPHA}); "
+        f"empty: alpha < {EMPTY_ALPHA}; "
         f"a<0.9: alpha < {CRACK_ALPHA}; unseen: surfaces the panorama's centre never saw (seen / unseen dB: "
         "PSNR over each part); pano dB: the panorama itself at the seen surfaces' exact directions, the "
         "ceiling of a scene built from it."
@@ -269,14 +276,15 @@ def _pct(x: float | None) -> float | None:
 def ring_markdown(scores: dict) -> list[str]:
     """The ring table as markdown lines (rows = rings)."""
     lines = [
-        "| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | empty % | alpha < 0.9 % | unseen % | seen dB | "
+        "| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | scale | empty % | alpha < 0.9 % | unseen % | seen dB | "
         "unseen dB | panorama dB |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for key, r in scores["rings"].items():
         lines.append(
             f"| {key} m | {_f(r['psnr'], '{:.2f}')} | {_f(r['ssim'], '{:.4f}')} | "
-            f"{_f(r['abs_rel'], '{:.4f}')} | {_f(r['delta1'], '{:.4f}')} | {_f(100 * r['empty'], '{:.2f}')} | "
+            f"{_f(r['abs_rel'], '{:.4f}')} | {_f(r['delta1'], '{:.4f}')} | {_f(r.get('scale'), '{:.3f}')} | "
+            f"{_f(100 * r['empty'], '{:.2f}')} | "
             f"{_f(100 * r['cracked'], '{:.2f}')} | {_f(_pct(r.get('unseen')), '{:.2f}')} | "
             f"{_f(r.get('psnr_seen'), '{:.2f}')} | {_f(r.get('psnr_unseen'), '{:.2f}')} | "
             f"{_f(r.get('psnr_panorama'), '{:.2f}')} |"

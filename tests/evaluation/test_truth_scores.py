@@ -38,7 +38,16 @@ def test_depth_errors_use_finite_truth_where_the_render_is_not_empty():
     assert r["pixels"] == 6 and r["coverage"] == pytest.approx(6 / 7)
     assert r["abs_rel"] == pytest.approx((0.1 + 1.5) / 6) and r["delta1"] == pytest.approx(5 / 6)
     none = ts.depth_errors(depth, torch.zeros(1, 2, 4), truth)
-    assert math.isnan(none["abs_rel"]) and none["coverage"] == 0.0
+    assert math.isnan(none["abs_rel"]) and math.isnan(none["scale"]) and none["coverage"] == 0.0
+
+
+def test_depth_scale_is_the_size_of_the_scene_not_its_outliers():
+    truth = torch.linspace(1.0, 4.0, 40).reshape(1, 5, 8)
+    depth = 1.03 * truth  # the whole room 3 % too large
+    depth[0, 0, :3] = 0.1  # a few pixels wildly off: the median does not move
+    r = ts.depth_errors(depth, torch.ones(1, 5, 8), truth)
+    assert r["scale"] == pytest.approx(1.03)
+    assert r["abs_rel"] > 0.03
 
 
 def test_ring_scores_count_empty_and_cracked_pixels():
