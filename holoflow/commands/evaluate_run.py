@@ -7,7 +7,7 @@ scene or a user's own panorama given by ``--use base_pano=FILE``) where a viewer
   1 m off the centre looking sideways and back at the depth's edges: their empty (alpha < 0.5) and
   cracked (alpha < 0.9) fractions and NIQE / BRISQUE against the source's views; beside the profile's goals.
 - With ``--truth DIR`` (a truth set, docs/truth-sets.md): the scene at each truth view's camera, per
-  ring PSNR / SSIM, depth AbsRel / delta < 1.25, empty and cracked fractions
+  ring PSNR / SSIM, depth AbsRel / delta < 1.25 / scale, empty and cracked fractions
   (holoflow.evaluation.truth_scores), and one truth | render picture per ring.
 
 Writes every number as JSON (``viewing.json``, ``truth-<set>.json``) and the pictures into ``--out``
