@@ -273,25 +273,6 @@ def _pct(x: float | None) -> float | None:
     return None if x is None else 100 * x
 
 
-def ring_markdown(scores: dict) -> list[str]:
-    """The ring table as markdown lines (rows = rings)."""
-    lines = [
-        "| ring | PSNR dB | SSIM | AbsRel | delta < 1.25 | scale | empty % | alpha < 0.9 % | unseen % | seen dB | "
-        "unseen dB | panorama dB |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for key, r in scores["rings"].items():
-        lines.append(
-            f"| {key} m | {_f(r['psnr'], '{:.2f}')} | {_f(r['ssim'], '{:.4f}')} | "
-            f"{_f(r['abs_rel'], '{:.4f}')} | {_f(r['delta1'], '{:.4f}')} | {_f(r.get('scale'), '{:.3f}')} | "
-            f"{_f(100 * r['empty'], '{:.2f}')} | "
-            f"{_f(100 * r['cracked'], '{:.2f}')} | {_f(_pct(r.get('unseen')), '{:.2f}')} | "
-            f"{_f(r.get('psnr_seen'), '{:.2f}')} | {_f(r.get('psnr_unseen'), '{:.2f}')} | "
-            f"{_f(r.get('psnr_panorama'), '{:.2f}')} |"
-        )
-    return lines
-
-
 def ring_strip(truth: torch.Tensor, *renders: torch.Tensor, side: int = 256, gap: int = 4) -> np.ndarray:
     """One picture of a ring: its views [V, H, W, 3] sRGB side by side, each fitted into ``side`` px, truth
     above the renders (one row each): uint8 [(1 + R) side + R gap, V side + (V - 1) gap, 3]."""

@@ -33,9 +33,12 @@ def test_eval_run_with_truth_scores_every_ring(two_runs, truth_dir, tmp_path, ca
     for key, ring in r["rings"].items():
         assert ring["views"] == 2 and 5 < ring["psnr"] < 60 and 0 <= ring["cracked"] <= 1
         assert ring["empty"] <= ring["cracked"] and 0 < ring["delta1"] <= 1 and ring["abs_rel"] < 0.5
+        assert 0.8 < ring["scale"] < 1.25  # the cabin's own depth: its size within a few per cent
         assert (folder / f"truth-cabin-ring-{key}.png").stat().st_size > 1000
     assert r["rings"]["0"]["psnr"] > 15  # the centre's own views of its own scene
-    assert "0.5 m" in printed and "a<0.9 %" in printed and "novel 0.5 m alpha < 0.9 %" in printed
+    assert (
+        "0.5 m" in printed and "a<0.9 %" in printed and " scale " in printed and "novel 0.5 m alpha < 0.9 %" in printed
+    )
     v = json.loads((folder / "viewing.json").read_text())
     assert 0 <= v["novel"]["0.5"]["cracked"] <= 1 and v["novel"]["0.5"]["empty"] <= v["novel"]["0.5"]["cracked"]
 
