@@ -75,11 +75,12 @@ def score_models(run_dir: Path, views: dict[str, Views], backend: str, nr: tuple
     with ``nr`` = (viewmats, K, size) the no-reference scores there (``nr_scores``, key supp_nr):
     ({tag: {gaussians, set name: scores}}, {tag: {set name: renders [C, H, W, 3]}})."""
     from holoflow.splat import GaussianModel
+    from holoflow.splat.rasterize import backend_device
 
     result: dict = {}
     renders: dict = {}
     for tag, stage, file in MODELS:
-        model = GaussianModel.load_ply(run_dir / stage / file)
+        model = GaussianModel.load_ply(run_dir / stage / file).to(backend_device(backend))
         result[tag], renders[tag] = {"gaussians": len(model)}, {}
         for name, v in views.items():
             result[tag][name], renders[tag][name] = score(model, v.viewmats, v.K, v.targets, backend, v.hidden)

@@ -190,10 +190,11 @@ def score_truth(model_file: Path, truth_dir: Path, backend: str = "cpu") -> tupl
 
     from holoflow.evaluation.truth_set import read_truth_set
     from holoflow.splat import GaussianModel
+    from holoflow.splat.rasterize import backend_device
 
     t0 = time.monotonic()
     ts = read_truth_set(truth_dir)
-    model = GaussianModel.load_ply(model_file)
+    model = GaussianModel.load_ply(model_file).to(backend_device(backend))
     H, W = ts.rgb.shape[1:3]
     rgb, alpha, depth = render_truth_views(model, ts.viewmats, ts.K, W, H, backend)
     rings = torch.tensor(ts.rings)

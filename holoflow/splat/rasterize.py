@@ -9,6 +9,12 @@ from holoflow.splat.project import eval_sh, pixel_extent, project_gaussians
 BACKENDS = ("auto", "reference", "cpu", "gsplat")
 
 
+def backend_device(backend: str) -> str:
+    """The device a model must be on to render with ``backend``: cuda for gsplat, else cpu ("auto" renders
+    wherever the model is, so cpu for a model just read from disk)."""
+    return "cuda" if backend == "gsplat" else "cpu"
+
+
 def rasterize(
     means: torch.Tensor,
     quats: torch.Tensor,

@@ -192,3 +192,24 @@ def test_the_panorama_at_exact_surfaces_reproduces_views_of_a_flat_coloured_room
     got = ts.panorama_at_surfaces(points, rays, pano)
     u = points / points.norm(dim=-1, keepdim=True)
     assert torch.allclose(got.double(), 0.5 + 0.5 * u, atol=0.03)  # bilinear on a 64 px panorama
+
+
+@pytest.mark.cuda
+def test_scoring_with_gsplat_matches_the_cpu_rasterizer(tmp_path):
+    if not torch.cuda.is_available():
+        pytest.skip("needs a CUDA device")
+    pytest.importorskip("gsplat")
+    from holoflow.scene import scene_from_prompt
+    from holoflow.splat import GaussianModel
+
+    write_truth_set(tmp_path / "t", scene_from_prompt("a small wooden cabin", 0), size=32, rings=(0.0, 0.5), per_ring=2)
+    g = torch.Generator().manual_seed(3)
+    d = torch.randn(3000, 3, generator=g)
+    xyz = d / d.norm(dim=-1, keepdim=True) * 2.0  # a sphere of coloured points around the eyes
+    GaussianModel.from_points(xyz.numpy(), torch.rand(3000, 3, generator=g).numpy(), opacity=0.9).save_ply(
+        tmp_path / "scene.ply"
+    )
+    cpu, _ = ts.score_truth(tmp_path / "scene.ply", tmp_path / "t", "cpu")
+    cuda, _ = ts.score_truth(tmp_path / "scene.ply", tmp_path / "t", "gsplat")  # the model is moved to the GPU
+    for ring in ("0", "0.5"):
+        assert abs(cuda["rings"][ring]["psnr"] - cpu["rings"][ring]["psnr"]) < 0.05, ring
