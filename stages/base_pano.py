@@ -17,7 +17,7 @@ def main() -> int:
     from holoflow.io.exr import write_rgb
     from holoflow.scene.config import BasePanoParams
 
-    cfg = job.config(BasePanoParams)
+    cfg = job.config(BasePanoParams).sized_for(job.engine)
     pano = BasePanoParams.ENGINES.get(job.engine)(job.prompt, cfg, job.seed, job.device, job.progress)
     depth = {} if pano.depth is None else {"Z": pano.depth}
     write_rgb(

@@ -143,3 +143,14 @@ def test_user_mistakes_end_in_one_line(chain, tmp_path):
         inputs={"pano": tmp / "base_pano" / "out"},
     )
     assert r.returncode != 0 and "unknown style" in r.stderr and r.stderr.strip().count("\n") == 0
+
+
+def test_base_pano_size_zero_is_the_engines_own():
+    from holoflow.scene.config import BasePanoParams
+
+    own = BasePanoParams()  # width = height = 0
+    assert own.sized_for("procedural").width == 2048 and own.sized_for("procedural").height == 1024
+    assert (own.sized_for("diffusion360").width, own.sized_for("diffusion360").height) == (1024, 512)
+    given = BasePanoParams(width=640, height=0).sized_for("procedural")
+    assert (given.width, given.height) == (640, 320)
+    assert BasePanoParams(width=640, height=300).sized_for("diffusion360").height == 300
