@@ -469,10 +469,11 @@ def score_run(
 
     from holoflow.io.exr import read_exr
     from holoflow.splat import GaussianModel
+    from holoflow.splat.rasterize import backend_device
 
     t = {}
     t0 = time.monotonic()
-    model = GaussianModel.load_ply(run_dir / model_file)
+    model = GaussianModel.load_ply(run_dir / model_file).to(backend_device(spec.backend))
     K = view_intrinsics(spec.size, spec.fov_deg)
     vm = base_camera_viewmats(run_dir)
     polar = polar_views(vm, spec.pole_deg)
