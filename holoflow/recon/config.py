@@ -80,6 +80,12 @@ class OptimParams(StageParams):
         "against metric_align's depth (holoflow/splat/train.py lambda_depth); 0 = colour only (paper)",
         ge=0,
     )
+    background: str = param(
+        "black",
+        "colour behind the Gaussians while training: black (3DGS), or random = a new colour every step, so "
+        "a see-through Gaussian costs loss (an enclosed scene is opaque everywhere; docs/reconstruction.md)",
+        choices=("black", "random"),
+    )
     opacity_reset_every: int = param(0, "0 = never (paper: no opacity reset)", "iters", ge=0)
     max_gaussians: int = param(200000, "densification stops growing past this count", ge=1)
     train_seed: int = param(

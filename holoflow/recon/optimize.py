@@ -147,6 +147,7 @@ def train_config(
         opacity_reset_every=cfg.opacity_reset_every,
         max_gaussians=cfg.max_gaussians,
         lambda_depth=cfg.depth_weight,
+        random_background=cfg.background == "random",
         backend=backend,
         scene_extent=extent,
         **({} if lr_span is None else dict(step_offset=lr_span[0], lr_means_steps=lr_span[1])),

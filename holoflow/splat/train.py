@@ -66,6 +66,10 @@ class TrainConfig:
     sh_degree_every: int = 1000
     """Activate one more SH band every this many steps, up to the model's degree."""
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    random_background: bool = False
+    """Composite every step over a new uniform random colour instead of ``background``: the loss then
+    sees any transparency, so a Gaussian cannot trade opacity for a colour above 1 (which holds only
+    where its neighbours overlap it as they did in the training views)."""
     backend: str = "auto"
     torch_threads: int | None = 1
     """torch intra-op threads while training (restored after); None leaves them. The numba kernels
@@ -159,6 +163,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
         H, W = image.shape[:2]
         sh_degree = min(model.sh_degree, (cfg.step_offset + it - 1) // max(cfg.sh_degree_every, 1))
         target = v.get("depth") if cfg.lambda_depth > 0 else None
+        step_bg = torch.rand(3, generator=gen).to(dev) if cfg.random_background else bg
         out = render(
             model,
             viewmats[order_i][None],
@@ -166,7 +171,7 @@ def _train(model: GaussianModel, views: list[dict], cfg: TrainConfig, progress, 
             W,
             H,
             backend=cfg.backend,
-            background=bg,
+            background=step_bg,
             sh_degree=sh_degree,
             depth=target is not None,
         )

@@ -110,6 +110,24 @@ def test_multiview_fit_improves_held_out_views():
     assert after > before + 3.0, (before, after)
 
 
+def test_random_background_makes_an_opaque_target_opaque():
+    # A grey wall seen head on, fitted by see-through Gaussians: over black, colour x opacity = grey is
+    # already a perfect fit, so the opacity stays where it started; over a new colour every step the
+    # background shows through any transparency, and only opacity 1 fits.
+    gt = surface_scene(150, seed=1, depth=3.0)
+    view = dict(gt_views(gt, [(0.0, 0.0, 0.0)], 24, target=(0.0, 0.0, 3.0))[0], image=torch.full((24, 24, 3), 0.4))
+    alpha = {}
+    for random_background in (False, True):
+        model = GaussianModel.from_points(gt["means"], torch.full((150, 3), 0.5), opacity=0.3)
+        cfg = TrainConfig(iterations=100, densify_from=1000, random_background=random_background)
+        train(model, [view], cfg, seed=0)
+        with torch.no_grad():
+            out = render(model, view["viewmat"][None], view["K"][None], 24, 24, backend="cpu")
+        alpha[random_background] = out["alpha"][0, 6:18, 6:18]  # the wall's middle
+    assert float(alpha[False].mean()) < 0.9  # it starts at 0.85
+    assert float(alpha[True].min()) > 0.97
+
+
 def test_masked_pixels_are_ignored():
     """Garbage in unsupervised target pixels must not change the result."""
     gt = surface_scene(60, seed=6, depth=3.0)
