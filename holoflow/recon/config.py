@@ -83,7 +83,7 @@ class OptimParams(StageParams):
     background: str = param(
         "black",
         "colour behind the Gaussians while training: black (3DGS), or random = a new colour every step, so "
-        "a see-through Gaussian costs loss (an enclosed scene is opaque everywhere; docs/reconstruction.md)",
+        "a see-through Gaussian costs loss (an enclosed scene is opaque everywhere; docs/bench-paper.md)",
         choices=("black", "random"),
     )
     opacity_reset_every: int = param(0, "0 = never (paper: no opacity reset)", "iters", ge=0)

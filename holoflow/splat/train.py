@@ -67,9 +67,9 @@ class TrainConfig:
     """Activate one more SH band every this many steps, up to the model's degree."""
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     random_background: bool = False
-    """Composite every step over a new uniform random colour instead of ``background``: the loss then
-    sees any transparency, so a Gaussian cannot trade opacity for a colour above 1 (which holds only
-    where its neighbours overlap it as they did in the training views)."""
+    """Composite every step over a new uniform random colour instead of ``background``: over black, a
+    see-through pixel with brighter Gaussians fits an opaque target as well as an opaque one does;
+    over a random colour only the opaque one fits."""
     backend: str = "auto"
     torch_threads: int | None = 1
     """torch intra-op threads while training (restored after); None leaves them. The numba kernels
