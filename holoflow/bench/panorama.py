@@ -38,8 +38,8 @@ DOZEN = [
     "a snowy mountain village in winter",
 ]
 SIZES = {  # stage -> (preview size, paper size), from pipeline.yaml's defaults and paper profile
-    "base_pano": ((1024, 512), (1024, 512)),
-    "stylize": ((1024, 512), (1536, 768)),
+    "base_pano": ((2048, 1024), (1024, 512)),  # the procedural engine's own width; the paper's
+    "stylize": ((2048, 1024), (1536, 768)),  # a base wider than stylize's width keeps it up to max_width
     "upscale": ((2048, 1024), (6144, 3072)),
     "detail": ((2048, 1024), (6144, 3072)),
 }
