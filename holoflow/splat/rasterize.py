@@ -54,6 +54,10 @@ def rasterize(
     if backend == "auto":
         backend = "gsplat" if means.is_cuda else "cpu"
     if backend == "gsplat":
+        if not means.is_cuda:
+            raise ValueError(
+                "rasterize: backend 'gsplat' renders CUDA tensors, got CPU ones (move the model with .to('cuda'))"
+            )
         return _rasterize_gsplat(
             means,
             quats,

@@ -232,6 +232,13 @@ def test_no_camera_renders_nothing(backend):
     assert out["depth"].shape == (0, 6, 8, 1)
 
 
+def test_gsplat_on_cpu_tensors_says_to_move_them():
+    p = random_scene(3, 0, torch.float32)
+    vm, K = cameras(8, 8, torch.float32, n=1)
+    with pytest.raises(ValueError, match="CUDA tensors.*to\\('cuda'\\)"):
+        rasterize(*[p[k] for k in NAMES], vm, K, 8, 8, backend="gsplat")
+
+
 def test_bad_inputs_raise():
     p = random_scene(3, 0, torch.float32)
     vm, K = cameras(8, 8, torch.float32, n=1)
