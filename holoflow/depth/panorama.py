@@ -208,10 +208,9 @@ def metric_from_disparity(
         depth, fit["sharpened"] = sharpen_edges(depth)
         yaw = None
         if cfg.room_yaw == "lines":
-            from holoflow.depth.layout import LayoutConfig, work_srgb8
-            from holoflow.depth.manhattan import panorama_yaw
+            from holoflow.depth.manhattan import room_yaw
 
-            yaw, fit["room_yaw"] = panorama_yaw(work_srgb8(pano, LayoutConfig.work_width))  # the layout's lines
+            yaw, fit["room_yaw"] = room_yaw(pano)  # the layout's lines
         depth, fit["planes"] = planes.refine_with_planes(depth, yaw=yaw)
     return MetricDepth(depth.astype(np.float32), fit, chosen, meta)
 

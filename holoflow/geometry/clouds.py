@@ -90,10 +90,15 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
     srgb = linear_to_srgb_torch(rgb)  # clamped to [0, 1] first
     pf_width = cfg.pf_width or min(rgb.shape[1], view_width(cfg.view_size, cfg.view_fov_deg), cfg.pf_max_width)
     clouds, counts, extra = {}, {}, {}
+    yaw, walls = None, None  # the room's wall heading, for the windows' planes
+    if cfg.opening_bars and cfg.opening_plane == "walls" and sky_fraction > 0:
+        from holoflow.depth.manhattan import room_yaw
+
+        yaw, walls = room_yaw(rgb.numpy())
     for i, (name, width) in enumerate({"p0": cfg.p0_width, "pf": pf_width, "ps": cfg.ps_width}.items()):
         col, d = resample_rgbd(srgb, depth, width, guided=cfg.depth_upsample == "guided")
         if cfg.opening_bars:
-            d, found = keep_opening_bars(col, d, colour_tol=cfg.opening_colour_tol)
+            d, found = keep_opening_bars(col, d, colour_tol=cfg.opening_colour_tol, yaw=yaw)
             counts[f"{name}_opening_bar_pixels"] = found["bar_pixels"]
             counts[f"{name}_opening_frame_pixels"] = found["frame_pixels"]
         sky = ~(torch.isfinite(d) & (d > 0))
@@ -127,6 +132,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         points=counts,
         polar_caps=pf.get("polar_caps"),
         polar_detail=extra.get("polar_detail"),
+        room_yaw=walls,
         sky_fraction=round(sky_fraction, 6),
         shell_radius=round(shell, 6),
         grad_threshold=cfg.grad_threshold,

@@ -141,6 +141,14 @@ class PointCloudParams(StageParams):
     opening_colour_tol: float = param(
         0.06, "opening_bars: how far (sRGB distance) from the sky's fitted colour a pixel is a bar", gt=0
     )
+    opening_plane: str = param(
+        "walls",
+        "opening_bars: the plane the bars go onto. walls = upright and facing the room's wall direction "
+        "(the panorama's straight lines, holoflow/depth/manhattan.py), only its distance fitted to the "
+        "frame; free = any plane through the frame (also walls without 10 horizontal lines), which a "
+        "wall edge in front of the frame tilts",
+        choices=("walls", "free"),
+    )
     sky_dome: bool = param(
         True,
         "where the panorama shows sky, P_f gets a coarse sky dome behind everything, "

@@ -83,6 +83,32 @@ def test_a_frame_blurred_behind_its_window_goes_onto_the_plane_and_nothing_befor
     assert torch.equal(out[rest], depth[rest])
 
 
+@pytest.mark.parametrize("heading", [0.0, 0.3])
+def test_with_the_rooms_heading_a_wall_edge_before_the_frame_does_not_tilt_the_bars(heading):
+    """The wall turned by ``heading`` (radians) about the vertical; a pillar 0.6 m before it covers the
+    frame's left side (a chimney breast beside a bay window): the bars go onto the wall's plane when the
+    room's heading is known (any of its four wall directions), the free plane through the frame leans
+    towards the pillar."""
+    import math
+
+    rgb, _, bar, panes = _wall_with_window()
+    dirs = equirect_directions(H, W, dtype=torch.float64)
+    normal = torch.tensor([math.sin(heading), 0.0, math.cos(heading)], dtype=torch.float64)
+    plane = WALL_Z / (dirs @ normal).clamp_min(1e-6)  # [H, W] radial metres to the turned wall
+    depth = torch.where((dirs @ normal) > 0.3, plane, torch.full((H, W), 3.0, dtype=torch.float64))
+    depth[bar | panes] = float("inf")
+    v, u = torch.meshgrid(torch.arange(H), torch.arange(W), indexing="ij")
+    pillar = (u >= 78) & (u < 84) & (v >= 20) & (v < 72)  # the frame's left side and beyond
+    depth[pillar] = plane[pillar] - 0.6
+    rgb[pillar] = 0.5
+    for yaw in (heading, heading + math.pi / 2):
+        out, found = keep_opening_bars(rgb, depth, yaw=yaw)
+        assert found["bar_pixels"] >= int(bar.sum())
+        assert torch.allclose(out[bar], plane[bar], rtol=0.01)
+    free, _ = keep_opening_bars(rgb, depth)
+    assert float(((free[bar] - plane[bar]).abs() / plane[bar]).max()) > 0.03
+
+
 def test_a_window_without_bars_a_cloud_in_a_pane_and_an_open_sky_stay_as_they_are():
     rgb, depth, _, _ = _wall_with_window(bars=False, cloud=True)
     out, found = keep_opening_bars(rgb, depth)
