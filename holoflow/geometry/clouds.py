@@ -94,7 +94,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
     if cfg.opening_bars and cfg.opening_plane == "walls" and sky_fraction > 0:
         from holoflow.depth.manhattan import room_yaw
 
-        yaw, walls = room_yaw(rgb.numpy())
+        yaw, walls = room_yaw(rgb.detach().cpu().numpy())
     for i, (name, width) in enumerate({"p0": cfg.p0_width, "pf": pf_width, "ps": cfg.ps_width}.items()):
         col, d = resample_rgbd(srgb, depth, width, guided=cfg.depth_upsample == "guided")
         if cfg.opening_bars:

@@ -12,8 +12,10 @@ by finite depth: not touching a pole row, at most ``max_fraction`` of the panora
    Tukey-reweighted location of the frame's points along that normal. A window sits in a wall: the
    free fit (no yaw) of all three of a plane's degrees of freedom to a thin ring is tilted by whatever
    else the ring holds, 20 degrees and 4-11 % of the distance on grey_white_room's bay windows, where
-   the chimney breast's edge borders them. Without a yaw: iteratively reweighted least squares (Tukey)
-   over all three, so a bay's side reveals and the sill do not tilt it more than that;
+   the chimney breast's edge borders them. Without a yaw, and where the frame's own free fit turns
+   more than ``WALL_TURN_DEG`` from every wall direction (a window in a canted wall) or that wall is
+   seen edge-on: iteratively reweighted least squares (Tukey) over all three, so a bay's side reveals
+   and the sill do not tilt it more than that;
 2. fits the sky's own colour inside it: a quadratic in the pixel coordinates per channel, again
    reweighted, so bars and frame pixels are outliers, not part of the fit;
 3. calls a pixel a *bar* when its colour is more than ``colour_tol`` (sRGB, and at least 4 robust
@@ -43,6 +45,8 @@ import numpy as np
 import torch
 
 TUKEY_C = 4.685  # Tukey's biweight constant (95 % efficiency for Gaussian residuals)
+WALL_TURN_DEG = 35.0  # a free window plane turned further from every wall direction is its own wall's
+# (grey_white_room's frames, a wall edge beside them, turned it up to 21 degrees)
 
 
 def keep_opening_bars(
@@ -81,7 +85,9 @@ def keep_opening_bars(
             dirs = equirect_directions(H, W, dtype=torch.float64).numpy()
         u, ring_d = dirs[y0:y1, x0:x1], d[y0:y1, x0:x1][ring]
         points = u[ring] * ring_d[:, None]  # [R, 3] metres
-        plane = _robust_plane(points) if yaw is None else _wall_plane(points, yaw)
+        plane = _robust_plane(points)
+        if yaw is not None:
+            plane = _wall_plane(points, yaw, plane)
         if plane is None:
             continue
         normal, offset = plane  # offset > 0: a ray meets the plane at offset / cos, in front when cos > 0
@@ -372,16 +378,27 @@ def _window_plane(points: np.ndarray, tries: int = 256, seed: int = 0) -> tuple[
     return plane if plane is not None and plane[0] @ look >= 0.3 else None
 
 
-def _wall_plane(points: np.ndarray, yaw: float) -> tuple[np.ndarray, float] | None:
+def _wall_plane(
+    points: np.ndarray, yaw: float, free: tuple[np.ndarray, float] | None
+) -> tuple[np.ndarray, float] | None:
     """The upright plane n . p = offset through points [R, 3] (metres) around an opening whose normal n
-    is the room's horizontal wall direction (yaw + k 90 deg, k = 0..3; +y is down) that looks most
-    towards them, offset their Tukey-reweighted location along n (metres); None when that wall is seen
-    edge-on (n . mean direction < 0.3)."""
+    is one of the room's horizontal wall directions (yaw + k 90 deg, k = 0..3; +y is down): the one
+    nearest the ``free`` plane's (``_robust_plane`` through them; without it, the one that looks most
+    towards them), offset their Tukey-reweighted location along n (metres). The free plane comes back
+    instead where it turns more than ``WALL_TURN_DEG`` from every wall direction (a window in a wall
+    that is not the room's: a canted bay) or where n is seen edge-on (n . mean direction < 0.3)."""
     look = points.mean(0) / max(float(np.linalg.norm(points.mean(0))), 1e-12)
     walls = [np.array([math.sin(a), 0.0, math.cos(a)]) for a in yaw + np.arange(4) * math.pi / 2]
     normal = max(walls, key=lambda n: float(n @ look))
+    if free is not None:
+        across = free[0] * np.array([1.0, 0.0, 1.0])  # its horizontal part
+        across = across / max(float(np.linalg.norm(across)), 1e-12)
+        normal = max(walls, key=lambda n: abs(float(n @ across)))
+        normal = normal if float(normal @ look) > 0 else -normal
+        if math.degrees(math.acos(min(1.0, abs(float(normal @ across))))) > WALL_TURN_DEG:
+            return free
     if float(normal @ look) < 0.3:
-        return None
+        return free
     along = points @ normal  # [R] metres
     offset = float(np.median(along))
     floor = 0.005 * offset  # 5 mm at 1 m: no frame is flatter
@@ -390,7 +407,7 @@ def _wall_plane(points: np.ndarray, yaw: float) -> tuple[np.ndarray, float] | No
         scale = max(1.4826 * float(np.median(np.abs(resid))), floor)
         weights = np.clip(1 - (resid / (TUKEY_C * scale)) ** 2, 0, None) ** 2
         offset = float((weights * along).sum() / max(float(weights.sum()), 1e-12))
-    return (normal, offset) if offset > 0 else None
+    return (normal, offset) if offset > 0 else free
 
 
 def _robust_plane(points: np.ndarray) -> tuple[np.ndarray, float] | None:

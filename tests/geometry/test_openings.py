@@ -109,6 +109,21 @@ def test_with_the_rooms_heading_a_wall_edge_before_the_frame_does_not_tilt_the_b
     assert float(((free[bar] - plane[bar]).abs() / plane[bar]).max()) > 0.03
 
 
+def test_a_window_in_a_wall_that_is_not_the_rooms_keeps_its_own_plane():
+    """The wall turned 45 degrees from the room's heading (a canted bay): its frame's free plane wins."""
+    import math
+
+    rgb, _, bar, panes = _wall_with_window()
+    dirs = equirect_directions(H, W, dtype=torch.float64)
+    normal = torch.tensor([math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4)], dtype=torch.float64)
+    plane = WALL_Z / (dirs @ normal).clamp_min(1e-6)
+    depth = torch.where((dirs @ normal) > 0.3, plane, torch.full((H, W), 3.0, dtype=torch.float64))
+    depth[bar | panes] = float("inf")
+    out, found = keep_opening_bars(rgb, depth, yaw=0.0)
+    assert found["bar_pixels"] >= int(bar.sum())
+    assert torch.allclose(out[bar], plane[bar], rtol=0.01)
+
+
 def test_a_window_without_bars_a_cloud_in_a_pane_and_an_open_sky_stay_as_they_are():
     rgb, depth, _, _ = _wall_with_window(bars=False, cloud=True)
     out, found = keep_opening_bars(rgb, depth)
