@@ -145,8 +145,9 @@ class PointCloudParams(StageParams):
         "walls",
         "opening_bars: the plane the bars go onto. walls = upright and facing the room's wall direction "
         "(the panorama's straight lines, holoflow/depth/manhattan.py), only its distance fitted to the "
-        "frame; free = any plane through the frame (also walls without 10 horizontal lines), which a "
-        "wall edge in front of the frame tilts",
+        "frame; free = any plane through the frame, which a wall edge in front of the frame tilts (walls "
+        "falls back to it without 10 horizontal lines, for a frame turned over 35 deg from every wall, "
+        "and for a wall seen edge-on)",
         choices=("walls", "free"),
     )
     sky_dome: bool = param(
