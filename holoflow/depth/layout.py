@@ -273,6 +273,15 @@ def compose_depth(
     return np.where(lat >= lat_top[None, :], ceil, depth)
 
 
+def room_yaw(pano: np.ndarray) -> tuple[float | None, dict]:
+    """The room's wall heading from the straight lines of a linear RGB panorama [H, W, 3], seen at this
+    engine's working size (``work_srgb8``; holoflow.depth.manhattan.panorama_yaw): radians, modulo 90 deg,
+    or None with fewer than 10 horizontal lines; and its facts."""
+    from holoflow.depth.manhattan import panorama_yaw
+
+    return panorama_yaw(work_srgb8(pano, LayoutConfig.work_width))
+
+
 def work_srgb8(pano: np.ndarray, width: int) -> np.ndarray:
     """The copy of a linear RGB panorama [H, W, 3] that line and colour analysis runs on: at most
     ``width`` px wide (even, at least 16), exposure-normalised (median grey 0.18, so a dark or HDR

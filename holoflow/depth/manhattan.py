@@ -87,15 +87,6 @@ def panorama_yaw(srgb8: np.ndarray) -> tuple[float | None, dict]:
     return manhattan_yaw(normals, lengths)
 
 
-def room_yaw(pano: np.ndarray) -> tuple[float | None, dict]:
-    """``panorama_yaw`` of a linear RGB panorama [H, W, 3], seen at the layout engine's working size
-    (holoflow.depth.layout.work_srgb8): the room's wall heading (radians, modulo 90 deg) or None, and
-    its facts."""
-    from holoflow.depth.layout import LayoutConfig, work_srgb8
-
-    return panorama_yaw(work_srgb8(pano, LayoutConfig.work_width))
-
-
 def segment_evidence(
     p1: np.ndarray,
     p2: np.ndarray,

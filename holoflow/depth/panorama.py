@@ -208,7 +208,7 @@ def metric_from_disparity(
         depth, fit["sharpened"] = sharpen_edges(depth)
         yaw = None
         if cfg.room_yaw == "lines":
-            from holoflow.depth.manhattan import room_yaw
+            from holoflow.depth.layout import room_yaw
 
             yaw, fit["room_yaw"] = room_yaw(pano)  # the layout's lines
         depth, fit["planes"] = planes.refine_with_planes(depth, yaw=yaw)

@@ -92,7 +92,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
     clouds, counts, extra = {}, {}, {}
     yaw, walls = None, None  # the room's wall heading, for the windows' planes
     if cfg.opening_bars and cfg.opening_plane == "walls" and sky_fraction > 0:
-        from holoflow.depth.manhattan import room_yaw
+        from holoflow.depth.layout import room_yaw
 
         yaw, walls = room_yaw(rgb.detach().cpu().numpy())
     for i, (name, width) in enumerate({"p0": cfg.p0_width, "pf": pf_width, "ps": cfg.ps_width}.items()):
