@@ -8,10 +8,10 @@ by finite depth: not touching a pole row, at most ``max_fraction`` of the panora
 
 1. fits a plane to the frame around it: the finite pixels ``ring_px`` beyond its border, back-projected
    to metres. Given the room's wall heading (``yaw``, from the panorama's lines), the plane is upright
-   and faces the wall direction that looks most towards the opening; only its distance is fitted, a
+   and faces the wall direction nearest the frame's own free plane; only its distance is fitted, a
    Tukey-reweighted location of the frame's points along that normal. A window sits in a wall: the
    free fit (no yaw) of all three of a plane's degrees of freedom to a thin ring is tilted by whatever
-   else the ring holds, 20 degrees and 4-11 % of the distance on grey_white_room's bay windows, where
+   else the ring holds, 20 degrees and 6-11 % of the distance on grey_white_room's bay windows, where
    the chimney breast's edge borders them. Without a yaw, and where the frame's own free fit turns
    more than ``WALL_TURN_DEG`` from every wall direction (a window in a canted wall) or that wall is
    seen edge-on: iteratively reweighted least squares (Tukey) over all three, so a bay's side reveals
