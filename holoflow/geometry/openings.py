@@ -311,14 +311,20 @@ def _sky_fit(col: np.ndarray, comp: np.ndarray) -> tuple[np.ndarray, float]:
         # the scale from the best 30 % (a Gaussian's |x| has 0.385 sigma there): bars and the pixels
         # that mix them in can be half of a small pane, which would inflate a median's scale
         scale = max(float(np.quantile(resid, 0.3)) / 0.385, 1e-3)
-        weights = np.clip(1 - (resid / (TUKEY_C * scale)) ** 2, 0, None) ** 2
+        weights = _tukey(resid, scale)
         sw = np.sqrt(weights)[:, None]
         coef, *_ = np.linalg.lstsq(design * sw, c * sw, rcond=None)
         resid = np.linalg.norm(c - design @ coef, axis=1)  # [P]
     scale = max(float(np.quantile(resid, 0.3)) / 0.385, 1e-3)
-    weights = np.clip(1 - (resid / (TUKEY_C * scale)) ** 2, 0, None) ** 2
+    weights = _tukey(resid, scale)
     inlier = resid[weights > 0]
     return resid, 1.4826 * float(np.median(inlier)) if len(inlier) else 0.0
+
+
+def _tukey(resid: np.ndarray, scale: float) -> np.ndarray:
+    """Tukey's biweight [N] of residuals resid [N] at a robust scale (the same units): 1 at 0, 0 beyond
+    TUKEY_C scales."""
+    return np.clip(1 - (resid / (TUKEY_C * scale)) ** 2, 0, None) ** 2
 
 
 def _bar_pixels(comp: np.ndarray, resid: np.ndarray, sigma: float, colour_tol: float) -> np.ndarray:
@@ -389,8 +395,9 @@ def _wall_plane(
     that is not the room's: a canted bay) or where n is seen edge-on (n . mean direction < 0.3)."""
     look = points.mean(0) / max(float(np.linalg.norm(points.mean(0))), 1e-12)
     walls = [np.array([math.sin(a), 0.0, math.cos(a)]) for a in yaw + np.arange(4) * math.pi / 2]
-    normal = max(walls, key=lambda n: float(n @ look))
-    if free is not None:
+    if free is None:
+        normal = max(walls, key=lambda n: float(n @ look))
+    else:
         across = free[0] * np.array([1.0, 0.0, 1.0])  # its horizontal part
         across = across / max(float(np.linalg.norm(across)), 1e-12)
         normal = max(walls, key=lambda n: abs(float(n @ across)))
@@ -405,7 +412,7 @@ def _wall_plane(
     for _ in range(8):
         resid = along - offset
         scale = max(1.4826 * float(np.median(np.abs(resid))), floor)
-        weights = np.clip(1 - (resid / (TUKEY_C * scale)) ** 2, 0, None) ** 2
+        weights = _tukey(resid, scale)
         offset = float((weights * along).sum() / max(float(weights.sum()), 1e-12))
     return (normal, offset) if offset > 0 else free
 
@@ -423,7 +430,7 @@ def _robust_plane(points: np.ndarray) -> tuple[np.ndarray, float] | None:
         offset = float(normal @ centre)
         resid = np.abs(points @ normal - offset)
         scale = max(1.4826 * float(np.median(resid)), floor)
-        weights = np.clip(1 - (resid / (TUKEY_C * scale)) ** 2, 0, None) ** 2
+        weights = _tukey(resid, scale)
         if weights.sum() < 3:
             return None
     if (weights > 0).mean() < 0.5 or not math.isfinite(offset) or abs(offset) < 1e-9:
