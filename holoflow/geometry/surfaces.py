@@ -39,6 +39,22 @@ def _shift(x: torch.Tensor, dy: int, dx: int) -> torch.Tensor:
     return torch.roll(x[rows], -dx, 1)
 
 
+def _padded(x: torch.Tensor, r: int) -> torch.Tensor:
+    """x [H, W, ...] with r rows clamped above and below and r columns wrapped on either side
+    [H + 2r, W + 2r, ...]: ``_window(x_padded, r, dy, dx)`` is ``_shift(x, dy, dx)`` for |dy|, |dx| <= r,
+    as a view (a window over a whole panorama reads no copy per offset)."""
+    H = x.shape[0]
+    rows = torch.clamp(torch.arange(-r, H + r, device=x.device), 0, H - 1)
+    x = x[rows]
+    return torch.cat([x[:, -r:], x, x[:, :r]], 1) if r else x
+
+
+def _window(xp: torch.Tensor, r: int, dy: int, dx: int) -> torch.Tensor:
+    """The [H, W, ...] view of ``_padded(x, r)`` read at (row + dy, column + dx)."""
+    H, W = xp.shape[0] - 2 * r, xp.shape[1] - 2 * r
+    return xp[r + dy : r + dy + H, r + dx : r + dx + W]
+
+
 def depth_noise(radial_depth: torch.Tensor, edge: float = 0.05) -> float:
     """Per-pixel noise of radial_depth [H, W] as a relative standard deviation: the median absolute
     difference between each pixel's log depth and the mean of its four neighbours (pixels with a surface,
@@ -74,11 +90,13 @@ def smooth_depth(
     total = torch.zeros_like(logd)
     weight = torch.zeros_like(logd)
     inv = 1.0 / (2.0 * range_rel * range_rel)
+    logd_p, valid_p = _padded(logd, radius), _padded(valid, radius)
+    w, wn = torch.empty_like(logd), torch.empty_like(logd)  # reused: no large temporaries
     for dy in range(-radius, radius + 1):
         for dx in range(-radius, radius + 1):
-            n, ok = _shift(logd, dy, dx), _shift(valid, dy, dx)
-            w = torch.exp(-((n - logd) ** 2) * inv) * ok
-            total += w * n
+            n, ok = _window(logd_p, radius, dy, dx), _window(valid_p, radius, dy, dx)
+            torch.sub(n, logd, out=w).pow_(2).mul_(-inv).exp_().mul_(ok)  # exp(-(delta / range)^2 / 2)
+            total += torch.mul(w, n, out=wn)
             weight += w
     out = torch.exp(total / weight.clamp_min(1e-30))
     return torch.where(valid, out.to(d.dtype), d)
@@ -115,13 +133,17 @@ def surface_normals(radial_depth: torch.Tensor, tol: float = 0.1, radius: int = 
     t_v, ok_v = tangent(1, 0)  # south, one row
     if radius > 0:
         logd = safe.log()
-        sum_u, sum_v = torch.zeros_like(t_u), torch.zeros_like(t_v)
+        logd_p = _padded(logd, radius)
+        known_p = _padded(torch.cat([t_u * ok_u[..., None], t_v * ok_v[..., None]], -1), radius)  # [., ., 6]
+        sums = torch.zeros(H, W, 6, dtype=t_u.dtype, device=t_u.device)
+        step, diff = torch.empty_like(sums), torch.empty_like(logd)  # reused: no large temporaries
+        same = torch.empty(H, W, dtype=torch.bool, device=d.device)
         for dy in range(-radius, radius + 1):
             for dx in range(-radius, radius + 1):
-                same = (_shift(logd, dy, dx) - logd).abs() < tol
-                sum_u += _shift(t_u * ok_u[..., None], dy, dx) * same[..., None]
-                sum_v += _shift(t_v * ok_v[..., None], dy, dx) * same[..., None]
-        t_u, t_v = sum_u, sum_v
+                torch.sub(_window(logd_p, radius, dy, dx), logd, out=diff)
+                torch.lt(diff.abs_(), tol, out=same)
+                sums += torch.mul(_window(known_p, radius, dy, dx), same[..., None], out=step)
+        t_u, t_v = sums[..., :3], sums[..., 3:]
     n = torch.cross(t_u, t_v, dim=-1)
     norm = torch.linalg.vector_norm(n, dim=-1, keepdim=True)
     known = (ok_u & ok_v)[..., None] & (norm > 1e-12 * safe[..., None] ** 2)

@@ -14,7 +14,7 @@ from holoflow.geometry.camera import intrinsics_from_fov, look_at, quat_to_rotma
 from holoflow.geometry.clouds import point_clouds
 from holoflow.geometry.config import PointCloudParams
 from holoflow.geometry.sphere import equirect_directions
-from holoflow.geometry.surfaces import smooth_depth, surface_normals
+from holoflow.geometry.surfaces import _padded, _shift, _window, smooth_depth, surface_normals
 from holoflow.recon.config import TransferOptParams
 from holoflow.recon.optimize import init_model
 from holoflow.splat import render
@@ -48,6 +48,19 @@ def test_normals_of_a_box_room_are_its_walls():
             inner &= torch.roll(torch.roll(wall, dy, 0), dx, 1) == wall
     assert torch.allclose(n[inner], want[inner], atol=1e-6)
     assert torch.allclose(torch.linalg.vector_norm(n, dim=-1), torch.ones(H, W, dtype=torch.float64))
+
+
+@pytest.mark.parametrize("radius", [1, 3])
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32, torch.bool])
+def test_a_window_of_the_padded_panorama_reads_what_a_shift_reads(radius, dtype):
+    """The filters' fast path (one padded copy, a view per offset) against the per-offset reference
+    (gather the clamped rows, roll the wrapped columns): equal values, every offset, poles and seam."""
+    x = torch.randn(9, 14, 2, generator=torch.Generator().manual_seed(radius))
+    x = x > 0 if dtype == torch.bool else x.to(dtype)
+    xp = _padded(x, radius)
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            assert torch.equal(_window(xp, radius, dy, dx), _shift(x, dy, dx))
 
 
 def test_a_pixel_without_depth_or_neighbours_faces_the_centre():
