@@ -43,10 +43,10 @@ def _padded(x: torch.Tensor, r: int) -> torch.Tensor:
     """x [H, W, ...] with r rows clamped above and below and r columns wrapped on either side
     [H + 2r, W + 2r, ...]: ``_window(x_padded, r, dy, dx)`` is ``_shift(x, dy, dx)`` for |dy|, |dx| <= r,
     as a view (a window over a whole panorama reads no copy per offset)."""
-    H = x.shape[0]
+    H, W = x.shape[:2]
     rows = torch.clamp(torch.arange(-r, H + r, device=x.device), 0, H - 1)
-    x = x[rows]
-    return torch.cat([x[:, -r:], x, x[:, :r]], 1) if r else x
+    cols = torch.arange(-r, W + r, device=x.device) % W  # wraps more than once on a panorama narrower than r
+    return x[rows][:, cols]
 
 
 def _window(xp: torch.Tensor, r: int, dy: int, dx: int) -> torch.Tensor:
