@@ -590,9 +590,18 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument(
         "--truth-ways",
-        default=",".join(TRUTH_WAYS),
-        help=f"--profiles: comma list of {', '.join(TRUTH_WAYS)}: exact depth, the simulated network's depth, RGB only",
+        default=None,
+        help=f"--profiles / --walk: comma list of {', '.join(TRUTH_WAYS)}: exact depth, the simulated network's "
+        "depth, RGB only (default: all three for --profiles, exact for --walk)",
     )
+    ap.add_argument(
+        "--walk",
+        action="store_true",
+        help="instead of the knob sweep, the knobs that buy accuracy off the centre, one at a time around "
+        "--walk-profile, on the --truth set, scored per ring with their seconds (holoflow.bench.walking; "
+        "--points picks some)",
+    )
+    ap.add_argument("--walk-profile", default="preview", help="--walk: the profile the knobs are turned around")
     ap.add_argument("--size", type=int, default=512, help="--profiles: viewing size, px")
     ap.add_argument("--fov", type=float, default=47.43, help="--profiles: viewing field of view, deg")
     ap.add_argument("--nr-cameras", type=int, default=12, help="--profiles: cameras NIQE / BRISQUE are taken at")
@@ -603,6 +612,13 @@ def main(argv: list[str] | None = None) -> int:
         help="--profiles: markdown file whose generated block (between markers) gets the table",
     )
     args = ap.parse_args(argv)
+    if args.walk:
+        from holoflow.bench import walking
+
+        args.store = args.store if args.store != STORE else STORE.with_name("store-walk")
+        args.truth_ways = args.truth_ways or "exact"
+        return walking.main(args)
+    args.truth_ways = args.truth_ways or ",".join(TRUTH_WAYS)
     if args.profiles:
         from holoflow.bench import profiles
 
