@@ -617,7 +617,7 @@ def main(argv: list[str] | None = None) -> int:
 
         args.store = args.store if args.store != STORE else STORE.with_name("store-walk")
         args.truth_ways = args.truth_ways or "exact"
-        return walking.main(args)
+        return walking.run(args)
     args.truth_ways = args.truth_ways or ",".join(TRUTH_WAYS)
     if args.profiles:
         from holoflow.bench import profiles
@@ -625,7 +625,7 @@ def main(argv: list[str] | None = None) -> int:
         args.store = args.store if args.store != STORE else STORE.with_name("store-profiles")
         if args.pictures is None and args.doc:
             args.pictures = args.doc.parent / "images"
-        return profiles.main(args)
+        return profiles.run(args)
     if args.quick:
         args.novel, args.novel_size = min(args.novel, 2), min(args.novel_size, 16)
     points = quick_points() if args.quick else full_points()

@@ -350,7 +350,7 @@ def write(args, block: str, runs: list[dict], skipped: list[str], notes: list[st
         )
 
 
-def main(args) -> int:
+def run(args) -> int:
     """Run the profile comparison for the parsed ``holoflow bench accuracy`` arguments (module
     docstring); returns the exit code."""
     from holoflow.evaluation.machine import machine

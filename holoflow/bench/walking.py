@@ -139,7 +139,7 @@ def table(rows: list[dict], machine: str) -> str:
     return "\n".join(lines + ["", END]) + "\n"
 
 
-def main(args) -> int:
+def run(args) -> int:
     """Run the walking sweep for the parsed ``holoflow bench accuracy --walk`` arguments (module
     docstring); returns the exit code."""
     from holoflow.evaluation.machine import machine

@@ -100,8 +100,9 @@ def dispatch(module: str, name: str, argv: list[str]) -> int:
         if e.name and module.startswith(e.name):
             return fail(f"`holoflow {name}` is not available: module {module} is not installed in this checkout")
         raise
-    if not hasattr(mod, "main"):
-        return fail(f"`holoflow {name}`: {module} has no main(argv)")
+    if not hasattr(mod, "main"):  # a part of another command (holoflow.bench.profiles: bench accuracy --profiles)
+        what = (mod.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
+        return fail(f"`holoflow {name}` is not a command of its own" + (f"; {module} is {what}" if what else ""))
     return mod.main(argv) or 0
 
 

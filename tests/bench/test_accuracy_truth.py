@@ -20,20 +20,10 @@ def test_truth_ways_are_the_commands_of_the_issue(tmp_path):
     assert cases == [] and "no truth set" in notes[0]
 
 
-def test_a_truth_set_is_run_and_scored_per_ring(tmp_path):
+def test_a_truth_set_is_run_and_scored_per_ring(tiny_truth_set, tmp_path):
     from holoflow.bench import accuracy as acc
-    from holoflow.evaluation.truth_set import write_truth_set
-    from holoflow.scene import scene_from_prompt
 
-    truth = write_truth_set(
-        tmp_path / "room",
-        scene_from_prompt("a small wooden cabin", 0),
-        size=48,
-        rings=(0.0, 0.5),
-        per_ring=2,
-        pano_width=128,
-        samples=1,
-    )
+    truth = tiny_truth_set
     doc = tmp_path / "acc.md"
     argv = [
         "--profiles",

@@ -4,33 +4,14 @@ truth set with its depth given, scored per ring beside its fresh-run seconds."""
 import json
 import math
 
-import pytest
 
-
-@pytest.fixture(scope="module")
-def truth(tmp_path_factory):
-    from holoflow.evaluation.truth_set import write_truth_set
-    from holoflow.scene import scene_from_prompt
-
-    folder = tmp_path_factory.mktemp("walk") / "room"
-    return write_truth_set(
-        folder,
-        scene_from_prompt("a small wooden cabin", 0),
-        size=48,
-        rings=(0.0, 0.5),
-        per_ring=2,
-        pano_width=128,
-        samples=1,
-    )
-
-
-def test_each_knob_is_run_on_the_truth_set_and_scored_per_ring_with_its_seconds(truth, tmp_path):
+def test_each_knob_is_run_on_the_truth_set_and_scored_per_ring_with_its_seconds(tiny_truth_set, tmp_path):
     from holoflow.bench import accuracy as acc
     from holoflow.bench.walking import BEGIN, END
 
     doc, out = tmp_path / "acc.md", tmp_path / "w.json"
     doc.write_text("# kept\n")
-    argv = ["--walk", "--walk-profile", "tiny", "--truth", str(truth), "--points", "base,no-layer"]
+    argv = ["--walk", "--walk-profile", "tiny", "--truth", str(tiny_truth_set), "--points", "base,no-layer"]
     argv += ["--store", str(tmp_path / "store"), "--doc", str(doc), "--json", str(out)]
     assert acc.main(argv) == 0
     base, no_layer = json.loads(out.read_text())["rows"]
@@ -45,10 +26,10 @@ def test_each_knob_is_run_on_the_truth_set_and_scored_per_ring_with_its_seconds(
     assert "| room-exact | no-layer | background layer | off |" in text
 
 
-def test_a_sweep_without_a_truth_set_or_with_an_unknown_point_says_why(truth, tmp_path, capsys):
+def test_a_sweep_without_a_truth_set_or_with_an_unknown_point_says_why(tiny_truth_set, tmp_path, capsys):
     from holoflow.bench import accuracy as acc
 
     assert acc.main(["--walk", "--truth", str(tmp_path / "none")]) == 2
     assert "no truth set" in capsys.readouterr().err
-    assert acc.main(["--walk", "--truth", str(truth), "--points", "base,warp-9"]) == 2
+    assert acc.main(["--walk", "--truth", str(tiny_truth_set), "--points", "base,warp-9"]) == 2
     assert "unknown point(s) ['warp-9']" in capsys.readouterr().err

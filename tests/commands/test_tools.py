@@ -151,3 +151,5 @@ def test_dag_and_dispatch(project, capsys):
 
     assert main(["bench", "no_such_bench"]) == 2
     assert "holoflow.bench.no_such_bench is not installed" in capsys.readouterr().err
+    assert main(["bench", "walking"]) == 2  # a part of bench accuracy, not a benchmark of its own
+    assert "is `holoflow bench accuracy --walk --truth DIR`" in capsys.readouterr().err
