@@ -20,9 +20,10 @@ on its equirect grid:
    silhouette's own far side, and where a farther surface reaches under it, that one too; where the
    panorama shows sky, a sky dome behind everything (``sky_dome``): one coarse point per direction that
    is not sky but within ``sky_dome_reach_deg`` of it, just beyond the shell, coloured by the sky
-   around it (``clean_sky``: the sky inside the openings, never the rim a frame mixes in; the layer's
-   sky takes it too), so that an eye off the centre looking out of a window past its frame sees sky,
-   never the void; before the dome,
+   around it (``clean_sky``: the sky inside the openings, never the rim a frame mixes in), so that an
+   eye off the centre looking out of a window past its frame sees sky, never the void; with the dome
+   the layer leaves the sky shell out (the dome covers those directions; the layer's sky, streaked
+   outwards from the opening's edge, only drew a second, streaked sky in front of it); before the dome,
    the side of a window's recess and the frame that the wall's edge hides from the centre
    (``opening_reveals``, holoflow/geometry/openings.py), so that such an eye sees them, not the sky;
 6. sampled by area (``pf_sampling``; polar caps sampled finer where the panorama's poles hold detail:
@@ -186,7 +187,10 @@ def _pf_cloud(
         xyz, c = equirect_to_points(col, d)
         n = normals[torch.isfinite(d) & (d > 0)]
     counts = {"pf_dropped_fraction": round(float((~keep).double().mean()), 6)}
+    dome = cfg.sky_dome and bool(sky.any())
     for ld, lcol in layers:  # the layer continues a far surface seen head on from the centre: discs face it
+        if dome:  # the sky's own layer is left to the dome, which stands behind everything there
+            ld = torch.where(ld >= shell * (1 - 1e-9), torch.full_like(ld, math.inf), ld)
         lxyz, lc = equirect_to_points(lcol, ld)
         ldirs = equirect_directions(*ld.shape, dtype=lxyz.dtype)[torch.isfinite(ld) & (ld > 0)]
         xyz, c, n = _append((xyz, c, n), (lxyz, lc, -ldirs))
@@ -197,7 +201,7 @@ def _pf_cloud(
         xyz, c, n = _append((xyz, c, n), (rxyz, rc, -rdirs))  # discs facing the centre, as the layer's
         counts["pf_reveal"] = int(len(rxyz))
     dome_width = max(8, col.shape[1] // cfg.sky_dome_coarse)
-    if cfg.sky_dome and bool(sky.any()):
+    if dome:
         dxyz, dc = sky_dome(sky_col, sky, shell * 1.05, dome_width, math.radians(cfg.sky_dome_reach_deg))
         xyz, c, n = _append((xyz, c, n), (dxyz, dc, -dxyz / torch.linalg.vector_norm(dxyz, dim=-1, keepdim=True)))
         counts["pf_dome"] = int(len(dxyz))

@@ -56,6 +56,15 @@ def test_point_clouds_add_a_dome_only_where_there_is_sky():
     assert "dome" not in off.pf
 
 
+def test_with_a_dome_the_background_layer_leaves_the_sky_shell_to_it():
+    rgb, depth, _ = _room_with_window()
+    cfg = dict(pf_width=128, pf_polar_density=1.0, layer_baseline=1.0)  # a 2 m room: the layer reaches 14 deg
+    bare = point_clouds(rgb, depth, PointCloudParams(**cfg, sky_dome=False)).meta["points"]
+    domed = point_clouds(rgb, depth, PointCloudParams(**cfg)).meta["points"]
+    assert bare["pf_layer"] > 0  # the sky continued under the wall around the window
+    assert domed.get("pf_layer", 0) == 0 and domed["pf_dome"] > 0  # the dome covers those directions
+
+
 def test_the_sky_behind_the_room_takes_the_sky_inside_the_window_not_its_rim():
     """A frame's colour mixed into the window's outer pixels (antialiasing, a network's blur) is no part
     of the sky the dome and the layer continue behind the wall: they take the colour inside."""
