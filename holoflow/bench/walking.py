@@ -127,14 +127,16 @@ def table(rows: list[dict], machine: str) -> str:
     ]
     for r in rows:
         b = first[r["way"]]
-        gain = " / ".join(
-            _f(r.get(f"psnr_{k}", math.nan) - b.get(f"psnr_{k}", math.nan), "{:+.2f}") for k in ("0.5", "1")
+        gain = " / ".join(  # rounded before the sign: no "-0.00"
+            _f(round(r.get(f"psnr_{k}", math.nan) - b.get(f"psnr_{k}", math.nan), 2) + 0.0, "{:+.2f}")
+            for k in ("0.5", "1")
         )
+        extra = _f(round(r["wall_s"] - b["wall_s"], 0) + 0.0, "{:+.0f}")
         lines.append(
             f"| {r['way']} | {r['point']} | {r['knob']} | {r['value']} | {_f(r['wall_s'], '{:.0f}')} "
             f"({_f(r['cpu_s'], '{:.0f}')}) | {r['gaussians']} | "
             + " | ".join(_f(r.get(f"psnr_{k}", math.nan)) for k in rings)
-            + f" | {_f(100 * r.get('cracked_0.5', math.nan))} | {gain} | {_f(r['wall_s'] - b['wall_s'], '{:+.0f}')} |"
+            + f" | {_f(100 * r.get('cracked_0.5', math.nan))} | {gain} | {extra} |"
         )
     return "\n".join(lines + ["", END]) + "\n"
 
