@@ -154,7 +154,7 @@ class PointCloudParams(StageParams):
         True,
         "where the panorama shows sky, P_f gets a coarse sky dome behind everything, "
         "coloured by the sky around it (holoflow/geometry/clouds.py): a window seen from off "
-        "the centre shows sky past its frame",
+        "the centre shows sky past its frame; the background layer then leaves the sky shell to it",
     )
     sky_dome_coarse: int = param(8, "sky_dome: its grid is P_f's width divided by this", ge=1)
     sky_dome_reach_deg: float = param(
