@@ -33,7 +33,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES, TRUTH_WAYS, stage_costs
+from holoflow.bench.profiles import PHOTO_PROMPT, PHOTOS, SCENES, TRUTH_WAYS, named, stage_costs
 
 PROMPT = "a cozy wooden cabin at night"
 NEUTRAL = ["stylize.style=none", "detail.strength=0.0"]  # truth applies (the eval profile's choice)
@@ -628,17 +628,9 @@ def main(argv: list[str] | None = None) -> int:
         return profiles.run(args)
     if args.quick:
         args.novel, args.novel_size = min(args.novel, 2), min(args.novel_size, 16)
-    points = quick_points() if args.quick else full_points()
-    if args.points != "all":
-        want = args.points.split(",")
-        unknown = sorted(set(want) - {p.name for p in points})
-        if unknown:
-            print(
-                f"holoflow bench accuracy: unknown point(s) {unknown}; choose from {[p.name for p in points]}",
-                file=sys.stderr,
-            )
-            return 2
-        points = [p for p in points if p.name in want]
+    points = named(quick_points() if args.quick else full_points(), args.points, "holoflow bench accuracy")
+    if points is None:
+        return 2
 
     mach = machine()
     rows, cache, paper = [], {}, None

@@ -58,6 +58,20 @@ class Case:
     truth: Path | None = None  # a truth set to score the run against per ring
 
 
+def named(points: list, names: str, prog: str) -> list | None:
+    """The sweep points (anything with a ``name``) named in the comma list ``names`` ("all": every one),
+    in their own order; None, after saying on stderr which names ``prog`` does not know, when some are
+    unknown."""
+    if names == "all":
+        return list(points)
+    want = names.split(",")
+    unknown = sorted(set(want) - {p.name for p in points})
+    if unknown:
+        print(f"{prog}: unknown point(s) {unknown}; choose from {[p.name for p in points]}", file=sys.stderr)
+        return None
+    return [p for p in points if p.name in want]
+
+
 def stage_costs(store, summary: dict) -> dict[str, dict]:
     """Per stage of a run summary: how it was served and the cost of computing it, from its record:
     {stage: {how, wall_s, cpu_s, peak_rss_mb}} (seconds, MB)."""

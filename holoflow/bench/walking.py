@@ -28,7 +28,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from holoflow.bench.profiles import PHOTO_PROMPT, replace_block, stage_costs, truth_cases
+from holoflow.bench.profiles import PHOTO_PROMPT, named, replace_block, stage_costs, truth_cases
 
 BEGIN = "<!-- holoflow bench accuracy --walk: begin (generated; edit outside these markers) -->"
 END = "<!-- holoflow bench accuracy --walk: end -->"
@@ -151,17 +151,9 @@ def run(args) -> int:
     if not cases:
         print(f"holoflow bench accuracy --walk: {'; '.join(notes) or 'needs --truth DIR'}", file=sys.stderr)
         return 2
-    points = list(POINTS)
-    if args.points != "all":
-        want = args.points.split(",")
-        unknown = sorted(set(want) - {p.name for p in points})
-        if unknown:
-            print(
-                f"holoflow bench accuracy --walk: unknown point(s) {unknown}; choose from {[p.name for p in points]}",
-                file=sys.stderr,
-            )
-            return 2
-        points = [p for p in points if p.name in want]
+    points = named(POINTS, args.points, "holoflow bench accuracy --walk")
+    if points is None:
+        return 2
     mach = machine()
     rows = []
     for case in cases:
