@@ -42,6 +42,15 @@ def main() -> int:
         f"point_cloud: {meta['points']}, shell radius {meta['shell_radius']:.3f} m, "
         f"sky {100 * meta['sky_fraction']:.2f}%"
     )
+    if meta["pf_detail"] is not None:
+        why = meta["pf_detail"]
+        kept = f"the panorama thinned to {why['plain_width']} px scores {why['thinning_psnr']:.1f} dB"
+        if why["on"]:
+            share = f"{100 * why['share']:.0f} %"
+            print(f"point_cloud: P_f {meta['pf_width']} px in the most detailed {share} of the sphere, half elsewhere")
+            print(f"point_cloud: ({kept})")
+        else:
+            print(f"point_cloud: P_f {meta['pf_width']} px ({kept}: no detail it loses)")
     if meta["polar_detail"] is not None:
         on = [k for k in ("north", "south") if (meta["polar_caps"] or {}).get(k)]
         lost = ", ".join(f"{k} {meta['polar_detail'][k]:.3g}" for k in ("north", "south", "sides"))

@@ -48,8 +48,9 @@ class Point:
 
 POINTS = (
     Point("base", "profile", ""),  # the value: the base profile's name
-    Point("pf-1792", "P_f width", "1792 px", ("point_cloud.pf_max_width=1792",)),
-    Point("pf-2048", "P_f width", "2048 px", ("point_cloud.pf_max_width=2048",)),
+    Point("pf-plain", "P_f by detail", "off (1536 px everywhere)", ("point_cloud.pf_detail_width=0",)),
+    Point("detail-half", "P_f by detail", "2048 px in half the sphere", ("point_cloud.pf_detail_share=0.5",)),
+    Point("detail-all", "P_f by detail", "2048 px everywhere", ("point_cloud.pf_detail_share=1",)),
     Point("fit-512", "colour fit view size", "512 px", ("transfer_opt.fit_size=512",)),
     Point("fit-3", "colour fit passes", "3", ("transfer_opt.fit_iters=3",)),
     Point(

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import torch
 
 from holoflow.geometry.camera import quat_to_rotmat, rotmat_to_quat
+from holoflow.geometry.sampling import resize_equirect
 from holoflow.geometry.sphere import lonlat_to_direction
 
 
@@ -167,20 +168,39 @@ def area_counts(height: int, width: int) -> torch.Tensor:
 
 
 def area_sample(
-    rgb: torch.Tensor, radial_depth: torch.Tensor, counts: torch.Tensor | None = None, rows: torch.Tensor | None = None
+    rgb: torch.Tensor,
+    radial_depth: torch.Tensor,
+    counts: torch.Tensor | None = None,
+    rows: torch.Tensor | None = None,
+    tiles: torch.Tensor | None = None,
+    tile_px: int = 8,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Area sampling of an equirect RGB-D image: rgb [H, W, C], radial_depth [Hd, Wd] (metres, any
     size; usually H x W) -> directions [N, 3] (unit, world), rgb [N, C] (box average over each point's
     longitude interval), depth [N] (the depth pixel under the point's centre; not filtered here) and
     that pixel [N] (long, row-major index into radial_depth: what else is known per depth pixel, e.g.
     its normal, is read there), rows top to bottom, longitudes ascending from -pi. ``counts`` [H]:
-    points per row (default ``area_counts``); ``rows`` [H] bool: the rows to sample (default all)."""
+    points per row (default ``area_counts``); ``rows`` [H] bool: the rows to sample (default all);
+    ``tiles`` [th, tw] bool: tiles of ``tile_px`` x ``tile_px`` depth pixels; only the points whose
+    longitude interval reaches into a True tile of their row are kept (and those wider than a tile),
+    so that two samplings kept on complementary tiles leave no gap between them."""
     H, W = rgb.shape[:2]
     Hd, Wd = radial_depth.shape
     counts = (area_counts(H, W) if counts is None else counts).to(rgb.device)  # [H]
     if rows is not None:
         counts = torch.where(rows.to(rgb.device), counts, torch.zeros_like(counts))
     row, centre, colour = ring_boxes(rgb, counts)  # [N], [N], [N, C]
+    if tiles is not None:
+        half = 0.5 * W / counts[row].to(torch.float64)  # [N] half the point's interval, pixels
+        ty = (torch.floor((row + 0.5) * (Hd / H)).long() // tile_px).clamp(0, tiles.shape[0] - 1)
+        to_tile = Wd / (W * tile_px)  # pixels of rgb -> tile columns
+
+        def tile_at(u: torch.Tensor) -> torch.Tensor:
+            return tiles[ty, torch.remainder(torch.floor(u * to_tile).long(), tiles.shape[1])]
+
+        wide = 2 * half * (Wd / W) >= tile_px
+        keep = tile_at(centre - half) | tile_at(centre + half - 1e-6) | wide
+        row, centre, colour = row[keep], centre[keep], colour[keep]
     lat = row_latitudes(H).to(rgb.device)[row]
     drow = row if Hd == H else torch.floor((row + 0.5) * (Hd / H)).long()
     dcol = torch.floor(centre if Wd == W else centre * (Wd / W)).long()
@@ -191,29 +211,47 @@ def area_sample(
 
 
 def equirect_to_area_points(
-    rgb: torch.Tensor, radial_depth: torch.Tensor, caps: PolarCaps | None = None, cap_rgb: torch.Tensor | None = None
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    rgb: torch.Tensor,
+    radial_depth: torch.Tensor,
+    caps: PolarCaps | None = None,
+    cap_rgb: torch.Tensor | None = None,
+    detail: torch.Tensor | None = None,
+    tile_px: int = 8,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, int]:
     """``equirect_to_points`` sampled by area: xyz [N, 3] (world, depth's dtype), rgb [N, C] and the
     depth pixel [N] (row-major index into radial_depth) of the area samples with finite depth > 0
-    (module docstring). rgb [H, W, C] and radial_depth [H, W] are
-    P_f's grid; with ``caps``, the rows beyond caps.split_deg come from cap_rgb [caps.width // 2,
-    caps.width, C] instead (depth still from radial_depth). Points run from the north pole south."""
-    if caps is None:
-        parts = [area_sample(rgb, radial_depth)]
-    else:
+    (module docstring), and how many of them (the last) were sampled at half width. rgb [H, W, C] and
+    radial_depth [H, W] are P_f's grid; with ``caps``, the rows beyond caps.split_deg come from cap_rgb
+    [caps.width // 2, caps.width, C] instead (depth still from radial_depth). With ``detail`` [th, tw]
+    bool (tiles of ``tile_px`` px of P_f's grid, holoflow/geometry/detail.py), P_f's rows are sampled
+    at full width only in the detail tiles and at half width (rgb resized, antialiased) in the others,
+    those points last. Points run from the north pole south (each sampling's)."""
+    H, W = rgb.shape[:2]
+    lat = row_latitudes(H)
+    inside = None if caps is None else ~caps.holds(lat)
+    parts = [area_sample(rgb, radial_depth, rows=inside, tiles=detail, tile_px=tile_px)]
+    if caps is not None:
         if cap_rgb is None or tuple(cap_rgb.shape[:2]) != (caps.width // 2, caps.width):
             raise ValueError(f"equirect_to_area_points: cap_rgb must be {caps.width // 2} x {caps.width}")
-        lat, cap_lat = row_latitudes(rgb.shape[0]), row_latitudes(cap_rgb.shape[0])
+        cap_lat = row_latitudes(cap_rgb.shape[0])
         ring = torch.clamp(torch.round(caps.ring_points * torch.cos(cap_lat)), 1, caps.width).long()
         cap_rows = caps.holds(cap_lat)
         parts = [
             area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat > 0)),
-            area_sample(rgb, radial_depth, rows=~caps.holds(lat)),
+            parts[0],
             area_sample(cap_rgb, radial_depth, ring, cap_rows & (cap_lat < 0)),
         ]
+    coarse = 0
+    if detail is not None:  # the other tiles at half width; rows reaching out of a cap belong to P_f
+        half = resize_equirect(rgb.permute(2, 0, 1), H // 2, W // 2).permute(1, 2, 0)
+        hlat = row_latitudes(H // 2)
+        rows = None if caps is None else ~caps.holds(hlat - torch.sign(hlat) * (math.pi / (H // 2)) / 2)
+        parts.append(area_sample(half, radial_depth, rows=rows, tiles=~detail, tile_px=tile_px))
+        coarse = len(parts[-1][0])
     dirs, colour, depth, pixel = (torch.cat(x) for x in zip(*parts))
     valid = torch.isfinite(depth) & (depth > 0)
-    return dirs[valid] * depth[valid][:, None], colour[valid], pixel[valid]
+    coarse = int(valid[len(valid) - coarse :].sum()) if coarse else 0
+    return dirs[valid] * depth[valid][:, None], colour[valid], pixel[valid], coarse
 
 
 def footprint_gaussians(

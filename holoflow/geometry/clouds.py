@@ -2,8 +2,9 @@
 
 P0 at ``p0_width`` (paper: the depth resolution); P_s at ``ps_width`` (the cloud the PCD set is
 projected from); P_f, the cloud the Gaussians start from, at ``pf_width`` (0 = as fine as a
-``view_size`` view resolves, capped at the panorama's width and ``pf_max_width``), built in this order
-on its equirect grid:
+``view_size`` view resolves, capped at the panorama's width and ``pf_max_width``; up to
+``pf_detail_width`` when the panorama holds detail that width loses: ``pf_detail_psnr``), built in this
+order on its equirect grid:
 
 1. (every cloud) window bars the depth lost to the sky put back in their window's plane
    (``opening_bars``, holoflow/geometry/openings.py), then sky (inf depth) on a far shell of radius
@@ -27,7 +28,9 @@ on its equirect grid:
    the side of a window's recess and the frame that the wall's edge hides from the centre
    (``opening_reveals``, holoflow/geometry/openings.py), so that such an eye sees them, not the sky;
 6. sampled by area (``pf_sampling``; polar caps sampled finer where the panorama's poles hold detail:
-   holoflow/geometry/area.py).
+   holoflow/geometry/area.py); at ``pf_detail_width``, at that width only in the tiles holding the
+   most detail (``pf_detail_share`` of the sphere) and at half of it in the others, whose points
+   follow P_f's own (holoflow/geometry/detail.py).
 
 Colour is resampled antialiased; depth is point-sampled when shrunk and, when the cloud is wider than
 the depth (``depth_upsample``), enlarged guided by the colour (holoflow/geometry/upsample.py): either way
@@ -44,6 +47,7 @@ import torch
 
 from holoflow.geometry.area import called_for, equirect_to_area_points, polar_caps, view_pixel_rad, view_width
 from holoflow.geometry.config import PointCloudParams
+from holoflow.geometry.detail import DETAIL_TILE_PX, detail_tiles, thinning_psnr
 from holoflow.geometry.edges import snap_depth_edges
 from holoflow.geometry.layers import background_layer
 from holoflow.geometry.openings import keep_opening_bars, opening_reveals
@@ -89,7 +93,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
     sky_fraction = float((~(torch.isfinite(depth) & (depth > 0))).double().mean())
     shell = cfg.sky_radius if cfg.sky_radius > 0 else far_shell_radius(depth)
     srgb = linear_to_srgb_torch(rgb)  # clamped to [0, 1] first
-    pf_width = cfg.pf_width or min(rgb.shape[1], view_width(cfg.view_size, cfg.view_fov_deg), cfg.pf_max_width)
+    pf_width, detail = _pf_width(srgb, cfg)
     clouds, counts, extra = {}, {}, {}
     yaw, walls = None, None  # the room's wall heading, for the windows' planes
     if cfg.opening_bars and cfg.opening_plane == "walls" and sky_fraction > 0:
@@ -105,7 +109,8 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         sky = ~(torch.isfinite(d) & (d > 0))
         d = sky_to_shell(d, shell)
         if name == "pf":
-            clouds[name], extra = _pf_cloud(srgb, col, d, sky, shell, cfg)
+            plain = detail["plain_width"] if detail is not None and detail["on"] else None
+            clouds[name], extra = _pf_cloud(srgb, col, d, sky, shell, cfg, plain)
             counts.update(extra.pop("counts"))
         else:
             xyz, c = equirect_to_points(col, d)
@@ -121,10 +126,12 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
     }  # the footprint init's low-pass
     if extra.get("caps") is not None:
         pf["polar_caps"] = extra["caps"].to_json()
-    if counts.get("pf_layer"):  # the last points of pf.ply, on every layer_stride-th row and column
+    if counts.get("pf_coarse"):  # after P_f's own points: the plain tiles' points, at half its width
+        pf["coarse"] = {"points": counts["pf_coarse"], "spacing_rad": 2 * math.pi / (pf_width // 2)}
+    if counts.get("pf_layer"):  # then the layer's, on every layer_stride-th row and column
         pf["layer"] = {"points": counts["pf_layer"], "spacing_rad": 2 * math.pi * cfg.layer_stride / pf_width}
-    if counts.get("pf_reveal"):  # after the layer: the openings' reveals, at P_f's own spacing
-        pf["reveal"] = {"points": counts["pf_reveal"], "spacing_rad": 2 * math.pi / pf_width}
+    if counts.get("pf_reveal"):  # after the layer: the openings' reveals, at P_f's plain spacing
+        pf["reveal"] = {"points": counts["pf_reveal"], "spacing_rad": 2 * math.pi / extra["reveal_width"]}
     if counts.get("pf_dome"):  # last: the sky dome's points
         pf["dome"] = {"points": counts["pf_dome"], "spacing_rad": 2 * math.pi / extra["dome_width"]}
     meta = dict(
@@ -133,6 +140,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         points=counts,
         polar_caps=pf.get("polar_caps"),
         polar_detail=extra.get("polar_detail"),
+        pf_detail=detail,
         room_yaw=walls,
         sky_fraction=round(sky_fraction, 6),
         shell_radius=round(shell, 6),
@@ -142,12 +150,38 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
     return Clouds(clouds, pf, meta)
 
 
+def _pf_width(srgb: torch.Tensor, cfg: PointCloudParams) -> tuple[int, dict | None]:
+    """P_f's width (px) for the panorama srgb [H, W, 3] and, where ``pf_detail_width`` could apply,
+    what decided it: {"on", "plain_width", "thinning_psnr" (dB, the panorama thinned to the plain
+    width), "share"} (holoflow/geometry/detail.py)."""
+    if cfg.pf_width:
+        return cfg.pf_width, None
+    limit = min(srgb.shape[1], view_width(cfg.view_size, cfg.view_fov_deg))
+    plain = min(limit, cfg.pf_max_width)
+    wide = min(limit, cfg.pf_detail_width)
+    wide -= wide % (2 * DETAIL_TILE_PX)
+    if cfg.pf_sampling != "area" or wide <= plain:
+        return plain, None
+    psnr = thinning_psnr(srgb, plain)
+    on = psnr < cfg.pf_detail_psnr
+    detail = {"on": on, "plain_width": plain, "thinning_psnr": round(psnr, 3), "share": cfg.pf_detail_share}
+    return (wide if on else plain), detail
+
+
 def _pf_cloud(
-    srgb: torch.Tensor, col: torch.Tensor, d: torch.Tensor, sky: torch.Tensor, shell: float, cfg: PointCloudParams
+    srgb: torch.Tensor,
+    col: torch.Tensor,
+    d: torch.Tensor,
+    sky: torch.Tensor,
+    shell: float,
+    cfg: PointCloudParams,
+    plain_width: int | None = None,
 ) -> tuple[Cloud, dict]:
     """P_f from its grid col [h, w, 3] (sRGB) and d [h, w] (radial m, the sky [h, w] on its shell of
-    radius ``shell``), steps 2-6 of the module docstring: (the cloud, {"counts", "caps", "polar_detail",
-    "dome_width"})."""
+    radius ``shell``), steps 2-6 of the module docstring; with ``plain_width`` (px, narrower than the
+    grid) sampled at full width only in its most detailed tiles (holoflow/geometry/detail.py), the
+    windows' reveals found at that width (their pixel sizes are a window's at it). Returns (the cloud,
+    {"counts", "caps", "polar_detail", "dome_width", "reveal_width"})."""
     d_open = torch.where(sky, torch.full_like(d, math.inf), d)  # the openings' sky, for their reveals
     sky_col = clean_sky(col, sky)  # [h, w, 3]: what lies unseen behind the room is sky, not its rims
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
@@ -181,12 +215,16 @@ def _pf_cloud(
             cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)
             caps, detail = called_for(caps, cap_rgb, col.shape[1], cfg.pf_polar_detail)
             detail = {k: float(f"{v:.4g}") for k, v in detail.items()}
-        xyz, c, pixel = equirect_to_area_points(col, d, caps, cap_rgb)
+        tiles = detail_tiles(col, cfg.pf_detail_share) if plain_width else None
+        xyz, c, pixel, coarse = equirect_to_area_points(col, d, caps, cap_rgb, tiles, DETAIL_TILE_PX)
         n = normals.reshape(-1, 3)[pixel]
     else:
         xyz, c = equirect_to_points(col, d)
         n = normals[torch.isfinite(d) & (d > 0)]
+        coarse = 0
     counts = {"pf_dropped_fraction": round(float((~keep).double().mean()), 6)}
+    if coarse:
+        counts["pf_coarse"] = coarse
     dome = cfg.sky_dome and bool(sky.any())
     for ld, lcol in layers:  # the layer continues a far surface seen head on from the centre: discs face it
         if dome:  # the sky's own layer is left to the dome, which stands behind everything there
@@ -196,7 +234,8 @@ def _pf_cloud(
         xyz, c, n = _append((xyz, c, n), (lxyz, lc, -ldirs))
         counts["pf_layer"] = counts.get("pf_layer", 0) + int(len(lxyz))
     if cfg.opening_reveals:  # the recesses' sides that the near jamb hides from the centre
-        rxyz, rc, _ = opening_reveals(col, d_open, 2 * math.pi / col.shape[1])
+        rcol, rd = resample_rgbd(col, d_open, plain_width) if plain_width else (col, d_open)
+        rxyz, rc, _ = opening_reveals(rcol, rd, 2 * math.pi / rcol.shape[1])
         rdirs = rxyz / torch.linalg.vector_norm(rxyz, dim=-1, keepdim=True).clamp_min(1e-12)
         xyz, c, n = _append((xyz, c, n), (rxyz, rc, -rdirs))  # discs facing the centre, as the layer's
         counts["pf_reveal"] = int(len(rxyz))
@@ -205,7 +244,8 @@ def _pf_cloud(
         dxyz, dc = sky_dome(sky_col, sky, shell * 1.05, dome_width, math.radians(cfg.sky_dome_reach_deg))
         xyz, c, n = _append((xyz, c, n), (dxyz, dc, -dxyz / torch.linalg.vector_norm(dxyz, dim=-1, keepdim=True)))
         counts["pf_dome"] = int(len(dxyz))
-    return Cloud(xyz, _to_u8(c), n), {"counts": counts, "caps": caps, "polar_detail": detail, "dome_width": dome_width}
+    found = {"counts": counts, "caps": caps, "polar_detail": detail, "dome_width": dome_width}
+    return Cloud(xyz, _to_u8(c), n), {**found, "reveal_width": plain_width or col.shape[1]}
 
 
 def clean_sky(rgb: torch.Tensor, sky: torch.Tensor, rim_px: int = SKY_RIM_PX) -> torch.Tensor:

@@ -29,6 +29,30 @@ class PointCloudParams(StageParams):
     pf_max_width: int = param(
         1536, "pf_width 0: at most this wide (the Gaussian count grows as its square)", "px", ge=2
     )
+    pf_detail_width: int = param(
+        2048,
+        "pf_width 0, pf_sampling area: when thinning the panorama to P_f's width loses detail "
+        "(pf_detail_psnr), P_f is built this wide instead (at most the panorama's own width and "
+        "what the view resolves) and sampled at this width only in the tiles holding the most detail "
+        "(pf_detail_share of the sphere), at half of it elsewhere (holoflow/geometry/detail.py); "
+        "not above P_f's width: off",
+        "px",
+        ge=0,
+    )
+    pf_detail_share: float = param(
+        0.25,
+        "pf_detail_width: the share of the sphere's area sampled at the full width (the tiles where "
+        "halving the width takes the most away); 1 = all of it",
+        gt=0,
+        le=1,
+    )
+    pf_detail_psnr: float = param(
+        38.0,
+        "pf_detail_width: taken when the panorama thinned to P_f's width and back scores below this "
+        "against itself (area-weighted; a smooth picture keeps P_f's width)",
+        "dB",
+        gt=0,
+    )
     pf_sampling: str = param(
         "area",
         "P_f's points: area = rows thinned by cos(lat), so every point covers "

@@ -66,7 +66,8 @@ def init_model(
 def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
     """``init_model``'s footprint for the P_f of a point_cloud output folder: (its pf.json's angular
     spacing, cfg.footprint_width, cfg.footprint_thickness, its polar caps or None, the point count of its
-    background layer, window recesses and sky dome (its last points) and their spacing per point, the
+    half-width points, background layer, window recesses and sky dome (its last points) and their
+    spacing per point, the
     rasterizer's low-pass at its viewing size in radians^2, its pf.ply's normals [N, 3] with
     ``footprint_orient: surface`` (else None: discs face the centre) and cfg.footprint_max_stretch), or
     None with ``init_scale: knn`` or no pf.json (a cloud of the user's own)."""
@@ -81,7 +82,8 @@ def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
         return None
     pf = json.loads(path.read_text())
     caps = PolarCaps(**pf["polar_caps"]) if "polar_caps" in pf else None
-    tails = [pf[k] for k in ("layer", "reveal", "dome") if k in pf]  # grids of their own after P_f's points, in order
+    # grids of their own after P_f's points, in order
+    tails = [pf[k] for k in ("coarse", "layer", "reveal", "dome") if k in pf]
     tail_points = sum(int(t["points"]) for t in tails)
     tail_spacing = (
         torch.cat([torch.full((int(t["points"]),), float(t["spacing_rad"]), dtype=torch.float64) for t in tails])

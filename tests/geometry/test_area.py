@@ -38,7 +38,7 @@ def _room(width: int, sampling: str, cfg: TransferOptParams, pc: PointCloudParam
     caps = polar_caps(width, 2 * width, pc.pf_polar_density, pc.pf_polar_from_deg)
     if sampling == "area":
         cap_rgb = None if caps is None else rgb[:1, :1].expand(caps.width // 2, caps.width, 3)
-        xyz, c, _ = equirect_to_area_points(rgb, depth, caps, cap_rgb)
+        xyz, c, _, _ = equirect_to_area_points(rgb, depth, caps, cap_rgb)
     else:
         xyz, c = equirect_to_points(rgb, depth)
     low_pass = EPS2D * view_pixel_rad(pc.view_size, pc.view_fov_deg) ** 2  # as recon.schedule.cloud_footprint
@@ -143,7 +143,7 @@ def test_polar_caps_keep_the_detail_of_the_polar_rows():
     psnr = {}
     for density in (1.0, 2.0):
         caps = polar_caps(pf_width, 2 * pf_width, density, 65.0)
-        xyz, c, _ = equirect_to_area_points(col, depth, caps, None if caps is None else pano)
+        xyz, c, _, _ = equirect_to_area_points(col, depth, caps, None if caps is None else pano)
         model = init_model(
             xyz.numpy(),
             (c.numpy() * 255 + 0.5).astype(np.uint8),
