@@ -9,7 +9,8 @@ order on its equirect grid:
 1. (every cloud) window bars the depth lost to the sky put back in their window's plane
    (``opening_bars``, holoflow/geometry/openings.py), then sky (inf depth) on a far shell of radius
    ``sky_radius`` (0 = 2 x the 99th percentile of finite depth), so the scene stays enclosed
-   (holoflow/geometry/pointcloud.py);
+   (holoflow/geometry/pointcloud.py); P_f's shell in the colour of the sky inside its openings
+   (``clean_sky``);
 2. occlusion edges that the depth draws as ramps made steps (holoflow/geometry/edges.py);
 3. per-pixel depth noise smoothed within each surface, never across an edge, and each pixel's surface
    normal (holoflow/geometry/surfaces.py): the Gaussians lie on their surfaces;
@@ -206,6 +207,7 @@ def _pf_cloud(
         layers = [own, (torch.where(behind, far[0], torch.full_like(far[0], math.inf)), far[1])]
     d = torch.where(keep, d, torch.full_like(d, float("nan")))
     caps, detail = None, None
+    pf_col = torch.where(sky[..., None], sky_col, col)  # the shell's sky without a frame's rim: no ghost frames
     if cfg.pf_sampling == "area":
         caps = polar_caps(
             col.shape[1], srgb.shape[1], cfg.pf_polar_density, cfg.pf_polar_from_deg, cfg.pf_polar_upsample
@@ -216,10 +218,10 @@ def _pf_cloud(
             caps, detail = called_for(caps, cap_rgb, col.shape[1], cfg.pf_polar_detail)
             detail = {k: float(f"{v:.4g}") for k, v in detail.items()}
         tiles = detail_tiles(col, cfg.pf_detail_share) if plain_width else None
-        xyz, c, pixel, coarse = equirect_to_area_points(col, d, caps, cap_rgb, tiles, DETAIL_TILE_PX)
+        xyz, c, pixel, coarse = equirect_to_area_points(pf_col, d, caps, cap_rgb, tiles, DETAIL_TILE_PX)
         n = normals.reshape(-1, 3)[pixel]
     else:
-        xyz, c = equirect_to_points(col, d)
+        xyz, c = equirect_to_points(pf_col, d)
         n = normals[torch.isfinite(d) & (d > 0)]
         coarse = 0
     counts = {"pf_dropped_fraction": round(float((~keep).double().mean()), 6)}

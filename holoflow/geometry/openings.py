@@ -136,7 +136,9 @@ def opening_reveals(
        its panes hides its side over its whole height (``_along_the_recess``);
     3. sweeps each such edge pixel straight back to the window's plane along its normal (the hidden
        side; a pixel whose sweep the centre sees, a side facing it, is left out: ``_behind_what_was_seen``
-       at the sweep's middle), then along the plane away from the edge, as far as the frame is wide where
+       at the sweep's middle), then along the plane square off the edge (``_across_the_edge``: not
+       towards where the ray past the edge meets the plane, which lies above or below the edge's foot
+       off the eye's level), as far as the frame is wide where
        the centre sees it (``_frame_width``, within ``ring_px`` + 2 px of the panes' box, at most
        ``frame_px`` pixels): the frame the edge hides;
     4. spaces the points ``spacing_rad`` x the edge's distance apart (P_f's spacing) and colours them
@@ -195,7 +197,8 @@ def opening_reveals(
         back = edge_xyz + front[jamb][:, None] * normal  # [J, 3] where the reveal meets the window's plane
         hit = ray * (offset / np.maximum(ray @ normal, 1e-6))[:, None]  # [J, 3] the plane behind the edge
         framed = solid & _box_around(window, ring_px + 2)  # the frame measured near the panes only
-        behind = back + _clip_length(hit - back, _frame_width(window, framed, front, dd, spacing_rad, frame_px))
+        across = _across_the_edge(hit - back, back, jamb, normal)  # the hidden strip runs square off the edge
+        behind = back + _clip_length(across, _frame_width(window, framed, front, dd, spacing_rad, frame_px))
         step = spacing_rad * dd[jamb]  # [J] metres between points: P_f's own spacing at the edge
         colour = np.median(col[y0:y1, x0:x1][face], 0)  # [3]
         for a, b in ((edge_xyz, back), (back, behind)):  # the reveal, then the window's plane it hides
@@ -272,6 +275,36 @@ def _frame_width(
     if border.sum() == 0 or frame.sum() == 0:
         return 0.0
     return float(frame.sum() / border.sum() * spacing_rad * np.median(dd[frame]))
+
+
+def _across_the_edge(v: np.ndarray, points: np.ndarray, jamb: np.ndarray, normal: np.ndarray, r: int = 3):
+    """v [J, 3] (in the window's plane) without its part along the wall's edge: the edge's direction at
+    each of points [J, 3] (the edge's pixels jamb [h, w], in their row-major order, swept onto the plane
+    of ``normal``) is the main axis of the edge's points within r px of it. The ray past a vertical
+    edge high above the eye meets the plane above the edge's foot: the hidden strip of frame is the
+    stretch square off the edge, as wide at the top of a window as at its sill."""
+    from scipy.ndimage import uniform_filter
+
+    h, w = jamb.shape
+    m = jamb.astype(np.float64)
+    p = np.zeros((h, w, 3))
+    p[jamb] = points
+    size = 2 * r + 1
+
+    def box(x: np.ndarray) -> np.ndarray:  # [h, w] local mean over the window (zeros outside the edge)
+        return uniform_filter(x, size, mode="constant")[jamb]
+
+    n = box(m)  # [J] share of the window on the edge
+    mean = np.stack([box(p[..., i]) for i in range(3)], -1) / n[:, None]  # [J, 3]
+    cov = np.empty((len(points), 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            cov[:, i, j] = cov[:, j, i] = box(p[..., i] * p[..., j]) / n - mean[:, i] * mean[:, j]
+    along = np.linalg.eigh(cov)[1][..., 2]  # [J, 3] the main axis
+    along = along - np.outer(along @ normal, normal)
+    along /= np.maximum(np.linalg.norm(along, axis=1, keepdims=True), 1e-12)
+    lone = n * size * size < 3  # too few neighbours for a direction: v as it is
+    return v - np.where(lone[:, None], 0.0, (v * along).sum(1, keepdims=True) * along)
 
 
 def _clip_length(v: np.ndarray, most: float) -> np.ndarray:

@@ -162,12 +162,12 @@ WALL, PANE = 2.0, 2.4
 WALL_GREY, REVEAL_GREY, BAR_GREY = 0.3, 0.55, 0.8
 
 
-def _recessed_window(niche: tuple[float, float] | None = None):
+def _recessed_window(niche: tuple[float, float] | None = None, hole: tuple[float, ...] = HOLE):
     """Ray cast of the recessed window from the centre: srgb [RH, RW, 3], radial depth [RH, RW] (sky inf;
     elsewhere a 3 m sphere). niche (top, bottom y): the recess runs that far up and down, past the
-    panes, with a panel in the window's plane above and below them."""
+    panes, with a panel in the window's plane above and below them; hole: the wall's hole (x0, x1, y0, y1)."""
     u = equirect_directions(RH, RW, dtype=torch.float64)  # [RH, RW, 3]
-    x0, x1, y0, y1 = HOLE
+    x0, x1, y0, y1 = hole
     py0, py1 = y0, y1  # the panes
     if niche is not None:
         y0, y1 = niche
@@ -242,6 +242,31 @@ def test_a_recess_taller_than_its_panes_has_its_hidden_side_whole():
     xyz, _, found = opening_reveals(rgb, depth, 2 * torch.pi / RW)
     assert found["reveals"] == 1
     _assert_the_hidden_side_alone(xyz, depth, top, bottom, rows=16)  # the panel's stretches included
+
+
+def test_the_hidden_frame_is_as_wide_at_the_top_of_a_tall_window_as_at_eye_level():
+    """A window reaching 1.3 m above the eye: the ray past its hidden edge meets the window's plane well
+    above the edge's foot there, but the strip of frame behind the edge runs square off the edge, so it
+    reaches as far beside the edge at the window's top as at eye level (sideways along the plane from
+    the hidden side x = x0; taking the ray's meeting point instead, the strip shrinks to nothing at the
+    top)."""
+    from holoflow.geometry.openings import opening_reveals
+
+    hole = (0.3, 1.0, -1.3, 0.2)
+    rgb, depth = _recessed_window(hole=hole)
+    xyz, _, found = opening_reveals(rgb, depth, 2 * torch.pi / RW)
+    assert found["reveals"] == 1
+    step = 2 * torch.pi / RW * PANE  # P_f's spacing at the window
+    plane = (xyz[:, 2] - PANE).abs() < 2 * step  # the window's plane behind the edge
+    reach, y = xyz[plane, 0] - hole[0], xyz[plane, 1]
+
+    def reach_at(height: float) -> float:
+        return float(reach[(y - height).abs() < 0.1].max())
+
+    eye = reach_at(0.0)
+    assert eye > 0.5 * step
+    for height in (-1.1, -0.8, -0.5):
+        assert abs(reach_at(height) - eye) < 0.5 * step, (height, reach_at(height), eye)
 
 
 def test_a_window_flush_with_its_wall_and_an_open_sky_get_no_reveals():

@@ -85,6 +85,25 @@ def test_the_sky_behind_the_room_takes_the_sky_inside_the_window_not_its_rim():
     assert torch.equal(clean_sky(rgb, torch.zeros_like(window)), rgb)  # no sky: nothing to clean
 
 
+def test_p_f_s_own_sky_takes_the_sky_inside_the_window_not_its_rim():
+    """P_f's points on the sky's shell are coloured like the sky inside the window: a rim of frame colour
+    there would move with the shell, a ghost of the frame in the panes seen from off the centre."""
+    from holoflow.imageops.color import srgb_to_linear_torch
+
+    rgb, depth, window = _room_with_window()
+    inner = window & torch.roll(window, 1, 1) & torch.roll(window, -1, 1)
+    inner &= torch.roll(window, 1, 0) & torch.roll(window, -1, 0)
+    rim = window & ~inner
+    mixed = torch.where(rim[..., None], torch.tensor([0.4, 0.45, 0.5]), rgb)  # sRGB
+    cfg = PointCloudParams(pf_width=128, pf_sampling="grid", layer_baseline=0.0, sky_dome=False)  # a point a pixel
+    pf = point_clouds(srgb_to_linear_torch(mixed), depth, cfg).clouds["pf"]
+    r = torch.linalg.vector_norm(pf.xyz, dim=-1)
+    on_shell = r > 3.0  # the room is 2 m, the shell twice its depth
+    assert on_shell.sum() >= inner.sum()
+    sky_u8 = torch.tensor([0.5, 0.7, 0.9]) * 255
+    assert float((pf.rgb[on_shell].float() - sky_u8).abs().max()) <= 1.0
+
+
 def test_the_dome_stays_within_its_reach_of_the_sky():
     """Behind a wall far from every window the dome would only show through cracks: none there."""
     rgb, _, window = _room_with_window()  # the window: within 18 deg of straight ahead
