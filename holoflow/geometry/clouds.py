@@ -65,6 +65,7 @@ from holoflow.geometry.surfaces import smooth_depth, surface_normals
 from holoflow.imageops.color import linear_to_srgb_torch
 
 SKY_RIM_PX = 2  # clean_sky: sky pixels this close to anything else mix in its colour
+REVEAL_WIDTH = 1536  # px: opening_reveals' pixel sizes hold a window at this width; finer grids are resampled
 
 
 @dataclass
@@ -110,8 +111,8 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         sky = ~(torch.isfinite(d) & (d > 0))
         d = sky_to_shell(d, shell)
         if name == "pf":
-            plain = detail["plain_width"] if detail is not None and detail["on"] else None
-            clouds[name], extra = _pf_cloud(srgb, col, d, sky, shell, cfg, plain)
+            by_detail = detail is not None and detail["on"]
+            clouds[name], extra = _pf_cloud(srgb, col, d, sky, shell, cfg, by_detail)
             counts.update(extra.pop("counts"))
         else:
             xyz, c = equirect_to_points(col, d)
@@ -131,7 +132,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         pf["coarse"] = {"points": counts["pf_coarse"], "spacing_rad": 2 * math.pi / (pf_width // 2)}
     if counts.get("pf_layer"):  # then the layer's, on every layer_stride-th row and column
         pf["layer"] = {"points": counts["pf_layer"], "spacing_rad": 2 * math.pi * cfg.layer_stride / pf_width}
-    if counts.get("pf_reveal"):  # after the layer: the openings' reveals, at P_f's plain spacing
+    if counts.get("pf_reveal"):  # after the layer: the openings' reveals, at their grid's spacing
         pf["reveal"] = {"points": counts["pf_reveal"], "spacing_rad": 2 * math.pi / extra["reveal_width"]}
     if counts.get("pf_dome"):  # last: the sky dome's points
         pf["dome"] = {"points": counts["pf_dome"], "spacing_rad": 2 * math.pi / extra["dome_width"]}
@@ -176,14 +177,15 @@ def _pf_cloud(
     sky: torch.Tensor,
     shell: float,
     cfg: PointCloudParams,
-    plain_width: int | None = None,
+    by_detail: bool = False,
 ) -> tuple[Cloud, dict]:
     """P_f from its grid col [h, w, 3] (sRGB) and d [h, w] (radial m, the sky [h, w] on its shell of
-    radius ``shell``), steps 2-6 of the module docstring; with ``plain_width`` (px, narrower than the
-    grid) sampled at full width only in its most detailed tiles (holoflow/geometry/detail.py), the
-    windows' reveals found at that width (their pixel sizes are a window's at it). Returns (the cloud,
-    {"counts", "caps", "polar_detail", "dome_width", "reveal_width"})."""
+    radius ``shell``), steps 2-6 of the module docstring; ``by_detail``: sampled at full width only in
+    its most detailed tiles (holoflow/geometry/detail.py). The windows' reveals are found on the grid
+    resampled to at most ``REVEAL_WIDTH``. Returns (the cloud, {"counts", "caps", "polar_detail",
+    "dome_width", "reveal_width"})."""
     d_open = torch.where(sky, torch.full_like(d, math.inf), d)  # the openings' sky, for their reveals
+    reveal_width = min(col.shape[1], REVEAL_WIDTH)
     sky_col = clean_sky(col, sky)  # [h, w, 3]: what lies unseen behind the room is sky, not its rims
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
     d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise)
@@ -217,7 +219,7 @@ def _pf_cloud(
             cap_rgb = resize_equirect(srgb.permute(2, 0, 1), caps.width // 2, caps.width).permute(1, 2, 0)
             caps, detail = called_for(caps, cap_rgb, col.shape[1], cfg.pf_polar_detail)
             detail = {k: float(f"{v:.4g}") for k, v in detail.items()}
-        tiles = detail_tiles(col, cfg.pf_detail_share) if plain_width else None
+        tiles = detail_tiles(col, cfg.pf_detail_share) if by_detail else None
         xyz, c, pixel, coarse = equirect_to_area_points(pf_col, d, caps, cap_rgb, tiles, DETAIL_TILE_PX)
         n = normals.reshape(-1, 3)[pixel]
     else:
@@ -236,8 +238,8 @@ def _pf_cloud(
         xyz, c, n = _append((xyz, c, n), (lxyz, lc, -ldirs))
         counts["pf_layer"] = counts.get("pf_layer", 0) + int(len(lxyz))
     if cfg.opening_reveals:  # the recesses' sides that the near jamb hides from the centre
-        rcol, rd = resample_rgbd(col, d_open, plain_width) if plain_width else (col, d_open)
-        rxyz, rc, _ = opening_reveals(rcol, rd, 2 * math.pi / rcol.shape[1])
+        rcol, rd = resample_rgbd(col, d_open, reveal_width) if reveal_width < col.shape[1] else (col, d_open)
+        rxyz, rc, _ = opening_reveals(rcol, rd, 2 * math.pi / reveal_width)
         rdirs = rxyz / torch.linalg.vector_norm(rxyz, dim=-1, keepdim=True).clamp_min(1e-12)
         xyz, c, n = _append((xyz, c, n), (rxyz, rc, -rdirs))  # discs facing the centre, as the layer's
         counts["pf_reveal"] = int(len(rxyz))
@@ -247,7 +249,7 @@ def _pf_cloud(
         xyz, c, n = _append((xyz, c, n), (dxyz, dc, -dxyz / torch.linalg.vector_norm(dxyz, dim=-1, keepdim=True)))
         counts["pf_dome"] = int(len(dxyz))
     found = {"counts": counts, "caps": caps, "polar_detail": detail, "dome_width": dome_width}
-    return Cloud(xyz, _to_u8(c), n), {**found, "reveal_width": plain_width or col.shape[1]}
+    return Cloud(xyz, _to_u8(c), n), {**found, "reveal_width": reveal_width}
 
 
 def clean_sky(rgb: torch.Tensor, sky: torch.Tensor, rim_px: int = SKY_RIM_PX) -> torch.Tensor:
