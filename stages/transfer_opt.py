@@ -1,9 +1,9 @@
 """transfer_opt: Transfer Optimization. Fresh Gaussians from P_f, trained on the PANO and INP sets
 together (with ``depth_weight`` > 0 the PANO set's views also on metric_align's depth), then
 (``fit_iters`` > 0) their colours fitted to the detail panorama's views at the base cameras at the
-viewing size ``fit_size`` (holoflow/recon/colour_fit.py); writes the final scene (scene.ply, 3DGS
-layout), train_log.json and sRGB previews rendered from inside the scene (previews/look_around.png
-strip, previews/look_around.gif)."""
+viewing size ``fit_size`` (0: a quarter of P_f's width, holoflow/recon/optimize.py ``cloud_fit_size``;
+holoflow/recon/colour_fit.py); writes the final scene (scene.ply, 3DGS layout), train_log.json and
+sRGB previews rendered from inside the scene (previews/look_around.png strip, previews/look_around.gif)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def main() -> int:
     from holoflow.io.ply import read_points
     from holoflow.recon.colour_fit import fit_colours, polar_weights, viewing_views
     from holoflow.recon.config import TransferOptParams
-    from holoflow.recon.optimize import cloud_footprint, save_result, transfer_optimize
+    from holoflow.recon.optimize import cloud_fit_size, cloud_footprint, save_result, transfer_optimize
     from holoflow.recon.preview import write_previews
     from holoflow.recon.views import add_depth_targets, load_view_set
 
@@ -47,7 +47,8 @@ def main() -> int:
         job.torch_threads(job.cpus)  # the fit's views and residuals are large tensors
         pano = torch.from_numpy(read_rgb(job.input_file("detail", "pano.exr"))).permute(2, 0, 1)  # [3, H, W]
         t0 = time.perf_counter()
-        views = viewing_views(pano, cams, cfg.fit_size)
+        size = cloud_fit_size(job.input("cloud"), cfg.fit_size)
+        views = viewing_views(pano, cams, size)
         log["colour_fit"] = fit_colours(
             model,
             views,
@@ -58,6 +59,7 @@ def main() -> int:
             weights=polar_weights(views, cfg.fit_polar_weight),
             max_colour=cfg.fit_max_colour,
         )
+        log["colour_fit"]["size"] = size
         log["seconds"]["colour_fit"] = round(time.perf_counter() - t0, 3)
         job.torch_threads(1)
     save_result(job, model, log, pano_views, "scene.ply")  # G1, its fit and train_log.json

@@ -128,12 +128,13 @@ class TransferOptParams(OptimParams):
     use_inp: bool = param(True, "false = transfer on the PANO set only (the paper's ablation)")
     preview_size: int = param(96, "side of the look-around preview renders", "px", ge=1)
     fit_size: int = param(
-        384,
+        0,
         "colour fit after training: the base cameras at this view size, targets from "
-        "the detail panorama (holoflow/recon/colour_fit.py); 384 px at 47.43 deg is as fine "
-        "as a 2915 px panorama",
+        "the detail panorama (holoflow/recon/colour_fit.py); 0 = a quarter of P_f's width "
+        "(pf.json; 384 without one): 384 px at the preview's 1536, 512 where P_f goes by detail "
+        "(2048), about 1.8 view pixels per P_f point at 47.43 deg",
         "px",
-        ge=8,
+        ge=0,
     )
     fit_iters: int = param(
         1,

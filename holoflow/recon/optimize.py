@@ -110,6 +110,20 @@ def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
     )
 
 
+def cloud_fit_size(cloud_dir, fit_size: int) -> int:
+    """The colour fit's view size (px): ``fit_size``, or with 0 a quarter of the width of the P_f in a
+    point_cloud output folder (its pf.json; 384 without one): the fit's pixels keep the same share of
+    P_f's spacing whatever P_f's width (holoflow/recon/config.py ``fit_size``)."""
+    import json
+    from pathlib import Path
+
+    if fit_size:
+        return fit_size
+    path = Path(cloud_dir) / "pf.json"
+    width = int(json.loads(path.read_text()).get("width", 0)) if path.is_file() else 0
+    return max(8, width // 4) if width else 384
+
+
 def panorama_extent(xyz: np.ndarray) -> float:
     """Scene extent (metres) for the trainer's learning-rate scale and size thresholds: the median
     distance from the panorama centre of the points of P_f [N, 3] off the far sky shell

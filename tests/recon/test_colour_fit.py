@@ -183,3 +183,17 @@ def test_viewing_views_keep_the_field_of_view():
     assert float(views[0]["K"][0, 0]) == pytest.approx(24.0) and float(views[0]["K"][0, 2]) == pytest.approx(24.0)
     want = equirect_to_pinhole(pano, views[1]["K"], vm[1], 48, 48, mode="antialias")[0]
     torch.testing.assert_close(views[1]["image"], linear_to_srgb_torch(want.permute(1, 2, 0)))
+
+
+def test_the_fit_size_follows_p_f_s_width(tmp_path):
+    """fit_size 0: a quarter of P_f's width from its pf.json (384 px at 1536, 512 at 2048), 384 px for a
+    cloud without one; a size given is kept."""
+    import json
+
+    from holoflow.recon.optimize import cloud_fit_size
+
+    assert cloud_fit_size(tmp_path, 0) == 384  # no pf.json: a cloud of the user's own
+    for width, size in ((1536, 384), (2048, 512), (256, 64)):
+        (tmp_path / "pf.json").write_text(json.dumps({"width": width, "spacing_rad": 6.283 / width}))
+        assert cloud_fit_size(tmp_path, 0) == size
+    assert cloud_fit_size(tmp_path, 200) == 200
