@@ -6,7 +6,9 @@ the bent wall swims by pixels. Indoors most pixels lie on a few large planes who
 the room (Manhattan: a floor and ceiling, walls along two horizontal axes). This module finds those
 planes in the depth itself, takes the ratio plane / depth on their pixels as a sample of the bias,
 spreads it smoothly over the panorama (objects in front of a wall get the wall's correction, as the
-bias is regional), and lays the plane pixels exactly on their planes.
+bias is regional), and lays the plane pixels exactly on their planes. The planes that bound the room
+(walls, floor, ceiling: nothing lies beyond them) take their offsets from where they meet, which the
+bias does not move; a piece of furniture's front keeps its own fit, since its edges are no corners.
 
 Arrays: radial depth [H, W] metres (+inf sky), equirect, world axes of docs/conventions (+y down).
 Planes: ``axis`` a unit world vector [3] and ``offset`` s (metres) with p . a = s for the points p.
@@ -32,6 +34,12 @@ MIN_WIDTH = 256
 CURVED = 0.02
 #: the planes must cover this share of the sphere for the scene to be a room (else nothing is changed)
 MIN_ROOM = 0.3
+#: a plane bounds the room when, of the directions towards it, under this share see something beyond it;
+#: more is a piece of furniture (a shelf's front, a table top) with a wall or the floor behind it
+BEYOND = 0.2
+#: a contact equation left off by more than this (log of the offset ratio) in the joint solution counts
+#: for nothing (Tukey's biweight, iterated): a moulding's strip or a piece of furniture, not a corner
+CONTACT_OUTLIER = 0.05
 #: relative engines whose depth carries a network's blur and low-frequency bias (``refine: auto`` mends it)
 BIASED_ENGINES = ("depth_anything", "simulated")
 
@@ -126,6 +134,22 @@ def curved(offsets: np.ndarray, cos_to_axis: np.ndarray, weight: np.ndarray) -> 
     return abs(np.log(leaning / facing)) > CURVED
 
 
+def bounds_room(dirs: np.ndarray, depth: np.ndarray, weight: np.ndarray, planes: list, tol: float) -> list:
+    """Per plane, whether it bounds the room (bool): of the directions [H, W, 3] whose rays reach the
+    plane (weighted by [H, W], the finite depths' solid angle), under ``BEYOND`` see a depth [H, W] more
+    than ``tol`` (relative) beyond it. Nothing lies behind a wall, the floor or the ceiling but openings;
+    behind a cupboard's front or a table top the room goes on."""
+    out = []
+    for axis, offset, _ in planes:
+        along = dirs @ axis  # [H, W]
+        t = np.where(np.abs(along) > 1e-6, offset / np.where(np.abs(along) > 1e-6, along, 1.0), -1.0)  # [H, W] m
+        toward = (t > 0) & (weight > 0)
+        beyond = toward & (depth > t * (1 + tol))
+        reach = weight[toward].sum()
+        out.append(bool(reach > 0 and weight[beyond].sum() < BEYOND * reach))
+    return out
+
+
 def plane_depth_ratio(
     dirs: np.ndarray, depth: np.ndarray, normals: np.ndarray, planes: list, tol: float, which: np.ndarray | None = None
 ):
@@ -169,21 +193,32 @@ def spread_log_ratio(log_ratio: np.ndarray, known: np.ndarray, sigma: float, fad
 
 
 def contact_offsets(
-    dirs: np.ndarray, depth: np.ndarray, which: np.ndarray, planes: list, ground: int, tol: float, gap: int = 6
+    dirs: np.ndarray,
+    depth: np.ndarray,
+    which: np.ndarray,
+    planes: list,
+    ground: int,
+    tol: float,
+    gap: int = 6,
+    bounds: list | None = None,
 ) -> tuple[list, list]:
-    """Plane offsets [P] re-derived from where the planes meet, the offset of plane ``ground`` (the
-    floor) held. Two planes touch where their pixels come within ``gap`` pixels of each other along a
-    row or a column, with only unassigned pixels between and the depth continuous across (a real
-    corner, not an occluding edge). A network's bias is smooth, so at a seam it is the same on both
-    sides, and the measured depths there have the ratio of the true offsets: each pair of planes that
-    touch at ``MIN_CONTACTS`` pixel pairs or more gives one equation (the median over its contacts) for
-    the log of that ratio, and all offsets are solved at once by weighted least squares
-    (``_solve_offsets``); a plane the solution moves by more than ``tol`` from its fit is dropped and the
-    rest solved again. This is how a room layout is read: positions from where the edges are in the
-    image, which a low-frequency bias does not move. Returns the offsets [P] and each plane's number of
-    contacts in the solution ([P], 0: kept as fitted)."""
+    """Plane offsets [P] re-derived from where the planes that bound the room (``bounds`` [P] bool,
+    ``bounds_room``; None: all) meet, the offset of plane ``ground`` (the floor) held; the others keep
+    their fit and their pixels count as unassigned. Two planes touch where their pixels come within
+    ``gap`` pixels of each other along a row or a column, with only unassigned pixels between and the
+    depth continuous across (a real corner, not an occluding edge). A network's bias is smooth, so at a
+    seam it is the same on both sides, and the measured depths there have the ratio of the true offsets:
+    each pair of planes that touch at ``MIN_CONTACTS`` pixel pairs or more gives one equation (the
+    median over its contacts) for the log of that ratio, and all offsets are solved at once by
+    weighted least squares, equations the solution leaves off by more than ``CONTACT_OUTLIER`` weighed
+    down to nothing (``_solve_robust``); a plane the solution moves by more than ``tol`` from its fit is
+    dropped and the rest solved again. This is how a room layout is read: positions from where the
+    edges are in the image, which a low-frequency bias does not move. Returns the offsets [P] and each
+    plane's number of contacts in the solution ([P], 0: kept as fitted)."""
     offsets = [p[1] for p in planes]
     count = [0] * len(planes)
+    if bounds is not None:  # furniture: neither a side of a contact nor in the solution
+        which = np.where(np.isin(which, [i for i, b in enumerate(bounds) if not b]), -1, which)
     free = which < 0
     d = np.where(np.isfinite(depth) & (depth > 0), depth, np.nan)
     pairs = []  # (plane a, plane b, rays at a [M, 3], at b [M, 3], depth at a [M], at b [M])
@@ -219,9 +254,9 @@ def contact_offsets(
         if m.sum() >= MIN_CONTACTS:
             edges.append((i, j, float(np.median(logq[m])), int(m.sum())))
     fitted = np.log(np.abs([p[1] for p in planes]))
-    free_planes = set(range(len(planes))) - {ground}
+    free_planes = {i for i in range(len(planes)) if bounds is None or bounds[i]} - {ground}
     for _ in range(len(planes)):  # solve; drop planes the contacts move by more than tol; solve again
-        x, reached = _solve_offsets(edges, len(planes), ground, fitted[ground], free_planes)
+        x, reached, edges_used = _solve_robust(edges, len(planes), ground, fitted[ground], free_planes)
         bad = {i for i in reached if i != ground and abs(x[i] - fitted[i]) > np.log1p(tol)}
         if not bad:
             break
@@ -229,8 +264,31 @@ def contact_offsets(
         edges = [e for e in edges if e[0] not in bad and e[1] not in bad]
     for i in reached - {ground}:
         offsets[i] = float(signs[i] * np.exp(x[i]))
-        count[i] = sum(e[3] for e in edges if i in e[:2])
+        count[i] = round(sum(e[3] for e in edges_used if i in e[:2]))
     return offsets, count
+
+
+def _solve_robust(edges: list, n: int, ground: int, x_ground: float, free: set, rounds: int = 20) -> tuple:
+    """``_solve_offsets`` with Tukey's biweight on the equations (threshold ``CONTACT_OUTLIER``),
+    iterated until the weights settle: the log offsets [n], the planes reached and the equations that
+    still count (their contacts scaled by their weight)."""
+    weight = {e[:2]: 1.0 for e in edges}
+    for _ in range(rounds):
+        used = [(i, j, d, c * weight[(i, j)]) for i, j, d, c in edges if weight[(i, j)] > 0]
+        x, reached = _solve_offsets(used, n, ground, x_ground, free)
+        new = {}
+        for i, j, d, _ in edges:
+            if i in reached and j in reached:
+                r = abs(x[i] - x[j] - d) / CONTACT_OUTLIER
+                new[(i, j)] = (1 - r * r) ** 2 if r < 1 else 0.0
+            else:
+                new[(i, j)] = weight[(i, j)]
+        settled = all(abs(new[k] - weight[k]) < 1e-4 for k in weight)
+        weight = new
+        if settled:
+            break
+    used = [(i, j, d, c * weight[(i, j)]) for i, j, d, c in edges if weight[(i, j)] > 0]
+    return (*_solve_offsets(used, n, ground, x_ground, free), used)
 
 
 def _solve_offsets(edges: list, n: int, ground: int, x_ground: float, free: set) -> tuple[np.ndarray, set]:
@@ -279,8 +337,8 @@ def refine_with_planes(
     1. normals of the depth; the room's axes (``room_axes``; turned by ``yaw`` when it is given: the
        heading of the walls found otherwise, e.g. from the panorama's straight lines); its planes
        (``find_planes``, tolerance ``tol``); the floor (the heaviest horizontal plane below the eye)
-       keeps its fitted offset, every other plane takes the offset its contacts imply
-       (``contact_offsets``);
+       keeps its fitted offset, every other plane that bounds the room (``bounds_room``) takes the
+       offset its contacts imply (``contact_offsets``), furniture keeps its fit;
     2. on the plane pixels the ratio plane / depth samples the network's low-frequency bias: its log,
        spread over the panorama with a Gaussian of ``sigma_frac`` x width pixels, multiplies every pixel;
     3. pixels within ``snap`` of a plane are laid on it, whatever their normal says: a network's normals
@@ -310,8 +368,9 @@ def refine_with_planes(
     ratio, which = plane_depth_ratio(dirs, depth, normals, planes, tol)
     floors = [i for i, p in enumerate(planes) if is_floor(p[0], p[1])]
     fitted, contacts = [p[1] for p in planes], [0] * len(planes)
+    bounds = bounds_room(dirs, depth, weight, planes, tol)
     if floors:
-        offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol)
+        offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol, bounds=bounds)
         planes = [(p[0], o, p[2]) for p, o in zip(planes, offsets)]
         ratio, _ = plane_depth_ratio(dirs, depth, normals, planes, np.inf, which)
     log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * W)
@@ -320,8 +379,15 @@ def refine_with_planes(
     out = np.where(on >= 0, out * ratio, out)
     facts = {
         "planes": [
-            {"axis": [round(float(v), 4) for v in p[0]], "offset": p[1], "fitted": f, "contacts": c, "share": p[2]}
-            for p, f, c in zip(planes, fitted, contacts)
+            {
+                "axis": [round(float(v), 4) for v in p[0]],
+                "offset": p[1],
+                "fitted": f,
+                "contacts": c,
+                "share": p[2],
+                "bounds_room": b,
+            }
+            for p, f, c, b in zip(planes, fitted, contacts, bounds)
         ],
         "on_planes": float(weight[on >= 0].sum()),
         "yaw_deg": round(float(np.degrees(np.arctan2(axes[1][0], axes[1][2]))), 3),

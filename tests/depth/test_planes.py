@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 import torch
 
-from holoflow.depth.planes import curved, find_planes, refine_with_planes, room_axes, wanted
+from holoflow.depth.planes import (
+    _solve_offsets,
+    _solve_robust,
+    curved,
+    find_planes,
+    refine_with_planes,
+    room_axes,
+    wanted,
+)
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.geometry.surfaces import surface_normals
 
@@ -80,6 +88,41 @@ def test_a_given_yaw_turns_the_axes_whatever_the_normals_say():
     assert math.isclose(facts["yaw_deg"], math.degrees(YAW), abs_tol=1e-3)
     assert abs_rel(out, truth) < 0.55 * abs_rel(bent, truth)
     assert len(facts["planes"]) == 6
+
+
+def with_cupboard(depth: np.ndarray, lo=(1.5, 0.1, -0.9), hi=(2.3, 1.6, 0.5)) -> np.ndarray:
+    """``depth`` [H, W] with a cupboard in it: the box lo..hi (metres, the room's frame) against the wall
+    x = HI[0], standing on the floor."""
+    H, W = depth.shape
+    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()
+    c, s = math.cos(YAW), math.sin(YAW)
+    d = dirs @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]]).T  # [H, W, 3] in the room's frame
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0, t1 = np.array(lo) / d, np.array(hi) / d  # slabs
+    near = np.nanmax(np.minimum(t0, t1), -1)
+    far = np.nanmin(np.maximum(t0, t1), -1)
+    return np.where((near <= far) & (near > 0), np.minimum(near, depth), depth)
+
+
+def test_a_cupboards_front_does_not_bound_the_room():
+    """Nothing lies beyond a wall, the floor or the ceiling; beyond a cupboard's front the room goes on,
+    so its edges are not read as the room's corners."""
+    out, facts = refine_with_planes(with_cupboard(turned_room()))
+    bounds = {round(p["offset"], 2): p["bounds_room"] for p in facts["planes"]}
+    assert bounds.pop(1.5) is False
+    assert sorted(bounds) == sorted(np.round(np.concatenate([LO, HI]), 2)) and all(bounds.values())
+
+
+def test_a_contact_that_breaks_the_loop_counts_for_nothing():
+    """Five planes meeting pairwise; one pair's equation is 9 % off (a moulding's strip read as the
+    corner): the least-squares solution bends every plane towards it, the biweight drops it."""
+    x = np.log([1.6, 1.2, 2.3, 1.7, 3.1])  # true log offsets, plane 0 the floor
+    edges = [(i, j, x[i] - x[j] + (0.09 if (i, j) == (1, 2) else 0.0), 100) for i in range(5) for j in range(i + 1, 5)]
+    plain, _ = _solve_offsets(edges, 5, 0, x[0], {1, 2, 3, 4})
+    robust, reached, used = _solve_robust(edges, 5, 0, x[0], {1, 2, 3, 4})
+    assert np.abs(plain - x).max() > 0.01
+    assert np.abs(robust - x).max() < 1e-9 and reached == set(range(5))
+    assert all(e[:2] != (1, 2) for e in used) and len(used) == 9
 
 
 def test_exact_depth_stays_as_it_is():
