@@ -82,7 +82,10 @@ def background_layer(
     src = source.detach().cpu().numpy().astype(np.bool_) & np.isfinite(d) & (d > 0)
     raw = np.where(np.isfinite(d) & (d > 0), d, np.inf)
     pad = np.pad(raw, ((1, 1), (0, 0)), constant_values=np.inf)
-    nbr = np.min([np.roll(pad, s, 1)[1 + dy : H + 1 + dy] for dy in (-1, 0, 1) for s in (-1, 0, 1)], axis=0)
+    nbr = pad[1 : H + 1].copy()  # [H, W] the nearest depth of each pixel's 3 x 3 neighbourhood
+    for dy in (-1, 0, 1):
+        for s in (-1, 0, 1):
+            np.minimum(nbr, np.roll(pad, s, 1)[1 + dy : H + 1 + dy], out=nbr)
     near = np.where(src, d, nbr)  # non-sources: the nearest depth around them
     col = np.ascontiguousarray(rgb.detach().cpu().double().numpy().reshape(H, W, -1))
     lat = (0.5 - (np.arange(H) + 0.5) / H) * math.pi

@@ -46,24 +46,38 @@ def guided_depth_upsample(
     x = (torch.arange(W, device=guide.device, dtype=dt) + 0.5) * (w / W) - 0.5  # [W]
     r0, c0 = torch.round(y).long(), torch.round(x).long()
     target = guide.permute(2, 0, 1)  # [3, H, W]
-    cand_disp, cand_sky, score = [], [], []
-    for dr in (-1, 0, 1):
+    offsets = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
+
+    def candidate(dr: int, dc: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The coarse pixel (dr, dc) from each fine pixel's nearest: its score [H, W] (the negative log
+        of its weight), disparity [H, W] and sky [H, W]."""
         rows = (r0 + dr).clamp(0, h - 1)  # [H]
+        cols = torch.remainder(c0 + dc, w)  # [W]
         dy2 = (y - rows.to(dt)) ** 2  # [H]
-        for dc in (-1, 0, 1):
-            cols = torch.remainder(c0 + dc, w)  # [W]
-            dx2 = (x - (c0 + dc).to(dt)) ** 2  # [W]
-            diff2 = ((small[:, rows][:, :, cols] - target) ** 2).sum(0)  # [H, W]
-            score.append((dy2[:, None] + dx2[None, :]) / (2 * sigma_px**2) + diff2 / (2 * sigma_rgb**2))
-            cand_disp.append(disp[rows][:, cols])
-            cand_sky.append(~finite[rows][:, cols])
-    score_t = torch.stack(score)  # [9, H, W]
-    d = torch.stack(cand_disp)  # [9, H, W]
-    sky = torch.stack(cand_sky)  # [9, H, W]
-    best = score_t.argmin(0, keepdim=True)  # [1, H, W]
-    d_best = d.gather(0, best)  # [1, H, W]
-    sky_best = sky.gather(0, best)  # [1, H, W]
-    same = torch.where(sky_best, sky, ~sky & ((d - d_best).abs() <= tol * d_best))  # [9, H, W]
-    weight = torch.exp(score_t.gather(0, best) - score_t) * same  # [9, H, W]; the best's weight is 1
-    mean = (weight * d).sum(0) / weight.sum(0)  # [H, W] disparity; the sky's is 0
+        dx2 = (x - (c0 + dc).to(dt)) ** 2  # [W]
+        diff2 = ((small[:, rows][:, :, cols] - target) ** 2).sum(0)  # [H, W]
+        score = (dy2[:, None] + dx2[None, :]) / (2 * sigma_px**2) + diff2 / (2 * sigma_rgb**2)
+        return score, disp[rows][:, cols], ~finite[rows][:, cols]
+
+    scores = []  # the nine candidates' scores, kept for the weights; the best is the first lowest
+    for k, (dr, dc) in enumerate(offsets):
+        score, d, sky = candidate(dr, dc)
+        scores.append(score)
+        if k == 0:
+            s_best, d_best, sky_best = score, d, sky
+        else:
+            better = score < s_best
+            s_best = torch.where(better, score, s_best)
+            d_best = torch.where(better, d, d_best)
+            sky_best = torch.where(better, sky, sky_best)
+    num = torch.zeros_like(s_best)  # [H, W] weighted disparity over the best's surface
+    den = torch.zeros_like(s_best)
+    for (dr, dc), score in zip(offsets, scores):
+        rows, cols = (r0 + dr).clamp(0, h - 1), torch.remainder(c0 + dc, w)
+        d, sky = disp[rows][:, cols], ~finite[rows][:, cols]
+        same = torch.where(sky_best, sky, ~sky & ((d - d_best).abs() <= tol * d_best))
+        weight = torch.exp(s_best - score) * same  # the best's weight is 1
+        num += weight * d
+        den += weight
+    mean = num / den  # [H, W] disparity; the sky's is 0
     return 1.0 / mean  # the sky's is inf
