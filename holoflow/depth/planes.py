@@ -37,9 +37,6 @@ MIN_ROOM = 0.3
 #: a plane bounds the room when, of the directions towards it, under this share see something beyond it;
 #: more is a piece of furniture (a shelf's front, a table top) with a wall or the floor behind it
 BEYOND = 0.2
-#: a contact equation left off by more than this (log of the offset ratio) in the joint solution counts
-#: for nothing (Tukey's biweight, iterated): a moulding's strip or a piece of furniture, not a corner
-CONTACT_OUTLIER = 0.05
 #: relative engines whose depth carries a network's blur and low-frequency bias (``refine: auto`` mends it)
 BIASED_ENGINES = ("depth_anything", "simulated")
 
@@ -210,9 +207,8 @@ def contact_offsets(
     seam it is the same on both sides, and the measured depths there have the ratio of the true offsets:
     each pair of planes that touch at ``MIN_CONTACTS`` pixel pairs or more gives one equation (the
     median over its contacts) for the log of that ratio, and all offsets are solved at once by
-    weighted least squares, equations the solution leaves off by more than ``CONTACT_OUTLIER`` weighed
-    down to nothing (``_solve_robust``); a plane the solution moves by more than ``tol`` from its fit is
-    dropped and the rest solved again. This is how a room layout is read: positions from where the
+    weighted least squares (``_solve_offsets``); a plane the solution moves by more than ``tol`` from
+    its fit is dropped and the rest solved again. This is how a room layout is read: positions from where the
     edges are in the image, which a low-frequency bias does not move. Returns the offsets [P] and each
     plane's number of contacts in the solution ([P], 0: kept as fitted)."""
     offsets = [p[1] for p in planes]
@@ -256,7 +252,7 @@ def contact_offsets(
     fitted = np.log(np.abs([p[1] for p in planes]))
     free_planes = {i for i in range(len(planes)) if bounds is None or bounds[i]} - {ground}
     for _ in range(len(planes)):  # solve; drop planes the contacts move by more than tol; solve again
-        x, reached, edges_used = _solve_robust(edges, len(planes), ground, fitted[ground], free_planes)
+        x, reached = _solve_offsets(edges, len(planes), ground, fitted[ground], free_planes)
         bad = {i for i in reached if i != ground and abs(x[i] - fitted[i]) > np.log1p(tol)}
         if not bad:
             break
@@ -264,31 +260,8 @@ def contact_offsets(
         edges = [e for e in edges if e[0] not in bad and e[1] not in bad]
     for i in reached - {ground}:
         offsets[i] = float(signs[i] * np.exp(x[i]))
-        count[i] = round(sum(e[3] for e in edges_used if i in e[:2]))
+        count[i] = sum(e[3] for e in edges if i in e[:2])
     return offsets, count
-
-
-def _solve_robust(edges: list, n: int, ground: int, x_ground: float, free: set, rounds: int = 20) -> tuple:
-    """``_solve_offsets`` with Tukey's biweight on the equations (threshold ``CONTACT_OUTLIER``),
-    iterated until the weights settle: the log offsets [n], the planes reached and the equations that
-    still count (their contacts scaled by their weight)."""
-    weight = {e[:2]: 1.0 for e in edges}
-    for _ in range(rounds):
-        used = [(i, j, d, c * weight[(i, j)]) for i, j, d, c in edges if weight[(i, j)] > 0]
-        x, reached = _solve_offsets(used, n, ground, x_ground, free)
-        new = {}
-        for i, j, d, _ in edges:
-            if i in reached and j in reached:
-                r = abs(x[i] - x[j] - d) / CONTACT_OUTLIER
-                new[(i, j)] = (1 - r * r) ** 2 if r < 1 else 0.0
-            else:
-                new[(i, j)] = weight[(i, j)]
-        settled = all(abs(new[k] - weight[k]) < 1e-4 for k in weight)
-        weight = new
-        if settled:
-            break
-    used = [(i, j, d, c * weight[(i, j)]) for i, j, d, c in edges if weight[(i, j)] > 0]
-    return (*_solve_offsets(used, n, ground, x_ground, free), used)
 
 
 def _solve_offsets(edges: list, n: int, ground: int, x_ground: float, free: set) -> tuple[np.ndarray, set]:

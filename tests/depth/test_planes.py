@@ -8,15 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from holoflow.depth.planes import (
-    _solve_offsets,
-    _solve_robust,
-    curved,
-    find_planes,
-    refine_with_planes,
-    room_axes,
-    wanted,
-)
+from holoflow.depth.planes import curved, find_planes, refine_with_planes, room_axes, wanted
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.geometry.surfaces import surface_normals
 
@@ -113,16 +105,16 @@ def test_a_cupboards_front_does_not_bound_the_room():
     assert sorted(bounds) == sorted(np.round(np.concatenate([LO, HI]), 2)) and all(bounds.values())
 
 
-def test_a_contact_that_breaks_the_loop_counts_for_nothing():
-    """Five planes meeting pairwise; one pair's equation is 9 % off (a moulding's strip read as the
-    corner): the least-squares solution bends every plane towards it, the biweight drops it."""
-    x = np.log([1.6, 1.2, 2.3, 1.7, 3.1])  # true log offsets, plane 0 the floor
-    edges = [(i, j, x[i] - x[j] + (0.09 if (i, j) == (1, 2) else 0.0), 100) for i in range(5) for j in range(i + 1, 5)]
-    plain, _ = _solve_offsets(edges, 5, 0, x[0], {1, 2, 3, 4})
-    robust, reached, used = _solve_robust(edges, 5, 0, x[0], {1, 2, 3, 4})
-    assert np.abs(plain - x).max() > 0.01
-    assert np.abs(robust - x).max() < 1e-9 and reached == set(range(5))
-    assert all(e[:2] != (1, 2) for e in used) and len(used) == 9
+def test_a_cupboard_keeps_its_own_fit_and_the_walls_their_seams():
+    """Under a network's bias the walls take their offsets from the seams they share with the floor and
+    each other; the cupboard's front, no side of the room, keeps the offset fitted to its own pixels."""
+    truth = with_cupboard(turned_room())
+    bent = truth * bias_field(*truth.shape)
+    _, facts = refine_with_planes(bent)
+    cupboard = [p for p in facts["planes"] if not p["bounds_room"]]
+    walls = [p for p in facts["planes"] if p["bounds_room"] and p["axis"][1] == 0.0]
+    assert len(cupboard) == 1 and cupboard[0]["contacts"] == 0 and cupboard[0]["offset"] == cupboard[0]["fitted"]
+    assert len(walls) == 4 and all(p["contacts"] > 0 for p in walls)
 
 
 def test_exact_depth_stays_as_it_is():
