@@ -131,6 +131,13 @@ def curved(offsets: np.ndarray, cos_to_axis: np.ndarray, weight: np.ndarray) -> 
     return abs(np.log(leaning / facing)) > CURVED
 
 
+def plane_distance(dirs: np.ndarray, axis: np.ndarray, offset: float) -> np.ndarray:
+    """Distance (m) [H, W] along each unit ray dirs [H, W, 3] to the plane p . axis = offset; -1 where
+    the ray runs parallel to it (negative also where the plane lies behind)."""
+    along = dirs @ axis  # [H, W]
+    return np.where(np.abs(along) > 1e-6, offset / np.where(np.abs(along) > 1e-6, along, 1.0), -1.0)
+
+
 def bounds_room(dirs: np.ndarray, depth: np.ndarray, weight: np.ndarray, planes: list, tol: float) -> list:
     """Per plane, whether it bounds the room (bool): of the directions [H, W, 3] whose rays reach the
     plane (weighted by [H, W], the finite depths' solid angle), under ``BEYOND`` see a depth [H, W] more
@@ -138,8 +145,7 @@ def bounds_room(dirs: np.ndarray, depth: np.ndarray, weight: np.ndarray, planes:
     behind a cupboard's front or a table top the room goes on."""
     out = []
     for axis, offset, _ in planes:
-        along = dirs @ axis  # [H, W]
-        t = np.where(np.abs(along) > 1e-6, offset / np.where(np.abs(along) > 1e-6, along, 1.0), -1.0)  # [H, W] m
+        t = plane_distance(dirs, axis, offset)  # [H, W] m
         toward = (t > 0) & (weight > 0)
         beyond = toward & (depth > t * (1 + tol))
         reach = weight[toward].sum()
@@ -160,8 +166,7 @@ def plane_depth_ratio(
     cos_lim = np.cos(np.radians(NORMAL_DEG))
     finite = np.isfinite(depth) & (depth > 0)
     for i, (axis, offset, _) in enumerate(planes):
-        along = dirs @ axis  # [H, W]
-        t = np.where(np.abs(along) > 1e-6, offset / np.where(np.abs(along) > 1e-6, along, 1.0), -1.0)
+        t = plane_distance(dirs, axis, offset)  # [H, W]
         r = np.where(finite & (t > 0), t / np.where(finite, depth, 1.0), np.inf)
         err = np.abs(np.log(np.where(np.isfinite(r) & (r > 0), r, np.inf)))
         if given is not None:

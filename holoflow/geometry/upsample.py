@@ -48,20 +48,18 @@ def guided_depth_upsample(
     target = guide.permute(2, 0, 1)  # [3, H, W]
     offsets = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
 
-    def candidate(dr: int, dc: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """The coarse pixel (dr, dc) from each fine pixel's nearest: its score [H, W] (the negative log
-        of its weight), disparity [H, W] and sky [H, W]."""
-        rows = (r0 + dr).clamp(0, h - 1)  # [H]
-        cols = torch.remainder(c0 + dc, w)  # [W]
+    def at(dr: int, dc: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Rows [H] and columns [W] of the coarse pixel (dr, dc) from each fine pixel's nearest."""
+        return (r0 + dr).clamp(0, h - 1), torch.remainder(c0 + dc, w)
+
+    scores = []  # the nine candidates' scores [H, W], kept for the weights; the best is the first lowest
+    for k, (dr, dc) in enumerate(offsets):
+        rows, cols = at(dr, dc)
         dy2 = (y - rows.to(dt)) ** 2  # [H]
         dx2 = (x - (c0 + dc).to(dt)) ** 2  # [W]
         diff2 = ((small[:, rows][:, :, cols] - target) ** 2).sum(0)  # [H, W]
         score = (dy2[:, None] + dx2[None, :]) / (2 * sigma_px**2) + diff2 / (2 * sigma_rgb**2)
-        return score, disp[rows][:, cols], ~finite[rows][:, cols]
-
-    scores = []  # the nine candidates' scores, kept for the weights; the best is the first lowest
-    for k, (dr, dc) in enumerate(offsets):
-        score, d, sky = candidate(dr, dc)
+        d, sky = disp[rows][:, cols], ~finite[rows][:, cols]  # [H, W]
         scores.append(score)
         if k == 0:
             s_best, d_best, sky_best = score, d, sky
@@ -73,8 +71,8 @@ def guided_depth_upsample(
     num = torch.zeros_like(s_best)  # [H, W] weighted disparity over the best's surface
     den = torch.zeros_like(s_best)
     for (dr, dc), score in zip(offsets, scores):
-        rows, cols = (r0 + dr).clamp(0, h - 1), torch.remainder(c0 + dc, w)
-        d, sky = disp[rows][:, cols], ~finite[rows][:, cols]
+        rows, cols = at(dr, dc)
+        d, sky = disp[rows][:, cols], ~finite[rows][:, cols]  # [H, W]
         same = torch.where(sky_best, sky, ~sky & ((d - d_best).abs() <= tol * d_best))
         weight = torch.exp(s_best - score) * same  # the best's weight is 1
         num += weight * d

@@ -71,16 +71,14 @@ def cloud_footprint(cloud_dir, cfg: OptimParams) -> tuple | None:
     rasterizer's low-pass at its viewing size in radians^2, its pf.ply's normals [N, 3] with
     ``footprint_orient: surface`` (else None: discs face the centre) and cfg.footprint_max_stretch), or
     None with ``init_scale: knn`` or no pf.json (a cloud of the user's own)."""
-    import json
     from pathlib import Path
 
     from holoflow.geometry.area import PolarCaps
     from holoflow.splat.project import EPS2D
 
-    path = Path(cloud_dir) / "pf.json"
-    if cfg.init_scale != "footprint" or not path.is_file():
+    pf = read_pf(cloud_dir) if cfg.init_scale == "footprint" else None
+    if pf is None:
         return None
-    pf = json.loads(path.read_text())
     caps = PolarCaps(**pf["polar_caps"]) if "polar_caps" in pf else None
     # grids of their own after P_f's points, in order
     tails = [pf[k] for k in ("coarse", "layer", "reveal", "dome") if k in pf]
@@ -114,14 +112,19 @@ def cloud_fit_size(cloud_dir, fit_size: int) -> int:
     """The colour fit's view size (px): ``fit_size``, or with 0 a quarter of the width of the P_f in a
     point_cloud output folder (its pf.json; 384 without one): the fit's pixels keep the same share of
     P_f's spacing whatever P_f's width (holoflow/recon/config.py ``fit_size``)."""
+    if fit_size:
+        return fit_size
+    width = int((read_pf(cloud_dir) or {}).get("width", 0))
+    return max(8, width // 4) if width else 384
+
+
+def read_pf(cloud_dir) -> dict | None:
+    """The pf.json of a point_cloud output folder (P_f's width, spacing and tails), None without one."""
     import json
     from pathlib import Path
 
-    if fit_size:
-        return fit_size
     path = Path(cloud_dir) / "pf.json"
-    width = int(json.loads(path.read_text()).get("width", 0)) if path.is_file() else 0
-    return max(8, width // 4) if width else 384
+    return json.loads(path.read_text()) if path.is_file() else None
 
 
 def panorama_extent(xyz: np.ndarray) -> float:
