@@ -129,7 +129,7 @@ def _report(args, rows, startup, same: bool) -> str:
         f"One batch of {args.scenes} scenes (`holoflow run --prompts FILE --profile {args.profile}"
         f"{' --until ' + args.until if args.until else ''}`), every step computed (a fresh store per "
         f"configuration), timed as one `holoflow` process each (wall clock, Python start-up included).",
-        f"Machine: {machine()}.",
+        f"Measured {time.strftime('%Y-%m-%d')}. Machine: {machine()}.",
         "",
         "| configuration | executor | steps run | wall s | speed-up vs -j 1 | load average (start -> end) |",
         "|---|---|---|---|---|---|",
@@ -159,9 +159,11 @@ def _report(args, rows, startup, same: bool) -> str:
         "",
         "Reading it: every step is its own process, so a tiny step costs mostly interpreter and "
         "library start-up; -j N overlaps independent steps (the scenes of a batch, and pano_set beside "
-        "tangent_depth / metric_align / point_cloud within a scene) within the stages' declared "
-        "`resources:` (the splatting stages ask for 2 CPUs, so on a 2-slot machine they run alone). "
-        "Ray adds its start-up and a task hop per step, and pays off when the cluster has more "
+        "tangent_depth / metric_align within a scene) within the stages' declared `resources:` "
+        "(point_cloud and the splatting stages ask for 2 CPUs, so on a 2-slot machine they run alone). "
+        "Ray adds its start-up and a task hop per step and starts every step cold (the local executor's "
+        "warm starts fork steps from a process that imported torch once), so on one machine it costs "
+        "more; it pays off when the cluster has more "
         "cores (or GPUs) than one machine. The machine is shared with other jobs: compare rows with "
         "the load average beside them.",
         "",
