@@ -37,6 +37,10 @@ MIN_ROOM = 0.3
 #: a plane bounds the room when, of the directions towards it, under this share see something beyond it;
 #: more is a piece of furniture (a shelf's front, a table top) with a wall or the floor behind it
 BEYOND = 0.2
+#: a snapped plane grows over the pixels connected to it that face its way, lie within ``GROW_TOL``
+#: (relative) of it and cross no depth step over ``GROW_STEP`` (relative, 3 x 3 px): ``grow_planes``
+GROW_TOL = 0.25
+GROW_STEP = 0.05
 #: relative engines whose depth carries a network's blur and low-frequency bias (``refine: auto`` mends it)
 BIASED_ENGINES = ("depth_anything", "simulated")
 
@@ -310,7 +314,7 @@ def refine_with_planes(
     depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, sigma_frac: float = 1 / 128, yaw: float | None = None
 ) -> tuple:
     """Radial depth [H, W] (metres, +inf sky) straightened by the room's planes, and facts (dict: the
-    planes, the share of the panorama on them, the correction's range).
+    planes, the share of the panorama on them and of it grown, the correction's range).
 
     1. normals of the depth; the room's axes (``room_axes``; turned by ``yaw`` when it is given: the
        heading of the walls found otherwise, e.g. from the panorama's straight lines); its planes
@@ -321,7 +325,8 @@ def refine_with_planes(
        spread over the panorama with a Gaussian of ``sigma_frac`` x width pixels, multiplies every pixel;
     3. pixels within ``snap`` of a plane are laid on it, whatever their normal says: a network's normals
        are off by ~20 deg (median) pixel to pixel, and a plane left a patchwork of laid and unlaid pixels
-       has a step at every seam, a crack one step away.
+       has a step at every seam, a crack one step away; each plane then grows over the pixels connected
+       to it that face its way and cross no depth step (``grow_planes``), which it takes too.
     When the planes cover under ``MIN_ROOM`` of the sphere (an open landscape, curved surfaces) the
     depth is returned unchanged."""
     import torch
@@ -353,7 +358,9 @@ def refine_with_planes(
         ratio, _ = plane_depth_ratio(dirs, depth, normals, planes, np.inf, which)
     log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * W)
     out = np.where(finite, depth * np.exp(log_c), depth)
-    ratio, on = plane_depth_ratio(dirs, out, None, planes, snap)
+    _, snapped = plane_depth_ratio(dirs, out, None, planes, snap)
+    on = grow_planes(dirs, out, normals, planes, snapped)
+    ratio, _ = plane_depth_ratio(dirs, out, None, planes, np.inf, on)
     out = np.where(on >= 0, out * ratio, out)
     facts = {
         "planes": [
@@ -368,10 +375,49 @@ def refine_with_planes(
             for p, f, c, b in zip(planes, fitted, contacts, bounds)
         ],
         "on_planes": float(weight[on >= 0].sum()),
+        "grown": float(weight[(on >= 0) & (snapped < 0)].sum()),
         "yaw_deg": round(float(np.degrees(np.arctan2(axes[1][0], axes[1][2]))), 3),
         "correction": [float(np.exp(log_c[finite].min())), float(np.exp(log_c[finite].max()))],
     }
     return out, facts
+
+
+def grow_planes(
+    dirs: np.ndarray,
+    depth: np.ndarray,
+    normals: np.ndarray,
+    planes: list,
+    which: np.ndarray,
+    tol: float = GROW_TOL,
+    step: float = GROW_STEP,
+    sigma: float = 2.0,
+) -> np.ndarray:
+    """Plane membership ``which`` [H, W] (-1: none) grown over the smooth surface around each plane: a
+    pixel joins plane i when it is connected (8-neighbours) to i's pixels through pixels that face along
+    i's axis (their normals [H, W, 3], smoothed over ``sigma`` px, within ``NORMAL_DEG``), lie within
+    ``tol`` (relative) of the plane and cross no depth step (the lightly smoothed depth ranges under
+    ``step``, relative, over their 3 x 3 px). A network's regional bias bends part of a face past the
+    snap tolerance (a bookshelf's top 9 % near while its middle sits on its plane); connected to the
+    rest and facing the same way, it is the same face. depth [H, W] radial metres (+inf sky)."""
+    import scipy.ndimage as ndi
+
+    mode = ("nearest", "wrap")
+    finite = np.isfinite(depth) & (depth > 0)
+    n = np.stack([ndi.gaussian_filter(np.nan_to_num(normals[..., k]), sigma, mode=mode) for k in range(3)], -1)
+    n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-9)
+    log_d = ndi.gaussian_filter(np.log(np.where(finite, depth, 1.0)), 1.0, mode=mode)
+    spread = ndi.maximum_filter(log_d, 3, mode=mode) - ndi.minimum_filter(log_d, 3, mode=mode)
+    smooth = finite & (spread < np.log1p(step))
+    out = which.copy()
+    for i, (axis, offset, _) in enumerate(planes):
+        t = plane_distance(dirs, axis, offset)  # [H, W] m
+        off = np.abs(np.log(np.where(t > 0, t, 1.0) / np.where(finite, depth, 1.0)))
+        facing = np.abs(n @ axis) > np.cos(np.radians(NORMAL_DEG))
+        joins = (out < 0) & smooth & (t > 0) & (off < np.log1p(tol)) & facing
+        labels, _ = ndi.label((out == i) | joins, structure=np.ones((3, 3)))
+        mine = np.unique(labels[out == i])
+        out[np.isin(labels, mine[mine > 0]) & (out < 0)] = i
+    return out
 
 
 def _weighted_median(x: np.ndarray, w: np.ndarray) -> float:

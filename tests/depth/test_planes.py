@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 import torch
 
-from holoflow.depth.planes import curved, find_planes, refine_with_planes, room_axes, wanted
+from holoflow.depth.planes import (
+    curved,
+    find_planes,
+    grow_planes,
+    plane_distance,
+    refine_with_planes,
+    room_axes,
+    wanted,
+)
 from holoflow.geometry.sphere import equirect_directions
 from holoflow.geometry.surfaces import surface_normals
 
@@ -115,6 +123,40 @@ def test_a_cupboard_keeps_its_own_fit_and_the_walls_their_seams():
     walls = [p for p in facts["planes"] if p["bounds_room"] and p["axis"][1] == 0.0]
     assert len(cupboard) == 1 and cupboard[0]["contacts"] == 0 and cupboard[0]["offset"] == cupboard[0]["fitted"]
     assert len(walls) == 4 and all(p["contacts"] > 0 for p in walls)
+
+
+def wall_and_patch(scale: float, soft: bool) -> tuple:
+    """The turned room's wall x = HI[0] as plane 0 and its depth [H, W] scaled by ``scale`` about the
+    wall's centre: smoothly (a Gaussian 0.3 rad wide: a network's regional bias) or, within 0.25 rad, as
+    a step (a box's front before the wall). Returns (dirs, depth, normals, planes, which: the pixels
+    within 5 % of the plane, patch [H, W] bool: where the depth is over 5 % off the plane)."""
+    depth = turned_room()
+    dirs = equirect_directions(*depth.shape, dtype=torch.float64).numpy()
+    axis = np.array([math.cos(YAW), 0.0, -math.sin(YAW)])  # the room's x axis in the world
+    angle = np.arccos(np.clip(dirs @ axis, -1.0, 1.0))  # [H, W] rad from the wall's centre
+    depth = depth * (1 + (scale - 1) * np.exp(-((angle / 0.3) ** 2)) if soft else np.where(angle < 0.25, scale, 1.0))
+    planes = [(axis, HI[0], 0.1)]
+    t = plane_distance(dirs, axis, HI[0])
+    which = np.where((t > 0) & (np.abs(t / depth - 1) < 0.05), 0, -1)
+    patch = (t > 0) & (np.abs(t / depth - 1) > 0.05) & (angle < 0.5)
+    return dirs, depth, surface_normals(torch.from_numpy(depth)).numpy(), planes, which, patch
+
+
+def test_a_face_bent_past_the_snap_by_a_bias_grows_back_onto_its_plane():
+    dirs, depth, normals, planes, which, patch = wall_and_patch(0.88, soft=True)
+    assert patch.sum() > 100 and (which[patch] == -1).all()
+    grown = grow_planes(dirs, depth, normals, planes, which)
+    assert (grown[patch] == 0).all()
+    assert (grown[which == 0] == 0).all()
+
+
+def test_a_box_before_the_wall_is_not_grown_onto_it():
+    """Its front faces the wall's way and lies within the growth's tolerance, but a depth step parts it."""
+    dirs, depth, normals, planes, which, patch = wall_and_patch(0.85, soft=False)
+    assert patch.sum() > 100
+    grown = grow_planes(dirs, depth, normals, planes, which)
+    assert (grown[patch] == -1).all()
+    assert np.array_equal(grown >= 0, which >= 0)
 
 
 def test_exact_depth_stays_as_it_is():
