@@ -398,7 +398,8 @@ def grow_planes(
     ``tol`` (relative) of the plane and cross no depth step (the lightly smoothed depth ranges under
     ``step``, relative, over their 3 x 3 px). A network's regional bias bends part of a face past the
     snap tolerance (a bookshelf's top 9 % near while its middle sits on its plane); connected to the
-    rest and facing the same way, it is the same face. depth [H, W] radial metres (+inf sky)."""
+    rest and facing the same way, it is the same face. The connections do not wrap across the
+    panorama's seam: each side grows from its own plane pixels. depth [H, W] radial metres (+inf sky)."""
     import scipy.ndimage as ndi
 
     mode = ("nearest", "wrap")
