@@ -249,7 +249,7 @@ def pano_width(path: Path) -> int:
 
 def truth_main(args, root: Path) -> int:
     """``--truth DIR``: the profile's reconstruction on the truth set, timed per step and scored per ring."""
-    from holoflow.bench.profiles import replace_block
+    from holoflow.bench.profiles import update_block
     from holoflow.evaluation.truth_scores import ring_strip, score_truth
     from holoflow.report.pictures import encode
 
@@ -289,8 +289,7 @@ def truth_main(args, root: Path) -> int:
             (folder / names[key]).write_bytes(encode(ring_strip(*pictures[key], side=160), "jpeg", 90))
     block = truth_report(rows, scores, wall, build_s, args, truth, names)
     out = root / args.out
-    text = out.read_text() if out.is_file() else ""
-    out.write_text(replace_block(text, block, TRUTH_BEGIN, TRUTH_END))
+    update_block(out, block, TRUTH_BEGIN, TRUTH_END)
     print(block)
     print(f"holoflow bench paper: wrote {out}", file=sys.stderr)
     return 0

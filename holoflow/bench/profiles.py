@@ -351,13 +351,22 @@ def replace_block(text: str, block: str, begin: str = BEGIN, end: str = END) -> 
     return text.rstrip("\n") + "\n\n" + block
 
 
+def update_block(path: Path, block: str, begin: str = BEGIN, end: str = END) -> None:
+    """The ``begin`` ... ``end`` block of the document at ``path`` replaced by ``block`` (``replace_block``;
+    a new document when there is none), written atomically: a full disk or a kill mid-write leaves the
+    old document whole, never a truncated one."""
+    from holoflow.flow.store import write_atomic
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, replace_block(path.read_text() if path.is_file() else "", block, begin, end))
+
+
 def write(args, block: str, runs: list[dict], skipped: list[str], notes: list[str]) -> None:
     """The block into ``--doc`` (``replace_block``) and every number into ``--json``, when given."""
     from holoflow.evaluation.machine import machine
 
     if args.doc:
-        args.doc.parent.mkdir(parents=True, exist_ok=True)
-        args.doc.write_text(replace_block(args.doc.read_text() if args.doc.is_file() else "", block))
+        update_block(args.doc, block)
     if args.json:
         args.json.write_text(
             json.dumps(dict(machine=machine(), skipped=skipped, notes=notes, runs=runs), indent=1, default=str)

@@ -15,7 +15,8 @@ only the stages its knob reaches and a stopped sweep resumes. Per point:
   fraction (alpha < 0.9) at 0.5 m.
 
 Writes a markdown block (the table, and each point's gain over the first against its extra seconds)
-into ``--doc`` between ``BEGIN`` / ``END`` markers, and with ``--json`` every number.
+into ``--doc`` between ``BEGIN`` / ``END`` markers once the sweep is whole (atomically: a stopped or
+failed sweep leaves the last table standing), and with ``--json`` every number, row by row.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from holoflow.bench.profiles import PHOTO_PROMPT, named, replace_block, stage_costs, truth_cases
+from holoflow.bench.profiles import PHOTO_PROMPT, named, stage_costs, truth_cases, update_block
 
 BEGIN = "<!-- holoflow bench accuracy --walk: begin (generated; edit outside these markers) -->"
 END = "<!-- holoflow bench accuracy --walk: end -->"
@@ -168,10 +169,8 @@ def run(args) -> int:
                 file=sys.stderr,
                 flush=True,
             )
-            if args.doc:  # a stopped sweep still leaves its rows
-                args.doc.parent.mkdir(parents=True, exist_ok=True)
-                old = args.doc.read_text() if args.doc.is_file() else ""
-                args.doc.write_text(replace_block(old, table(rows, mach), BEGIN, END))
-            if args.json:
+            if args.json:  # a stopped sweep still leaves its rows here
                 args.json.write_text(json.dumps(dict(machine=mach, rows=rows), indent=1, default=str))
+    if args.doc:  # the document only takes a whole sweep: a stopped one leaves the last table standing
+        update_block(args.doc, table(rows, mach), BEGIN, END)
     return 0

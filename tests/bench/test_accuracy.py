@@ -84,6 +84,26 @@ def test_profiles_block_replaces_only_its_own_markers():
     assert profiles.replace_block("# t\n", "B\n") == "# t\n\nB\n"
 
 
+def test_a_block_written_on_a_full_disk_leaves_the_document_whole(tmp_path, monkeypatch):
+    import os
+
+    from holoflow.bench import profiles
+
+    doc = tmp_path / "accuracy.md"
+    old = f"# title\n\n{profiles.BEGIN}\nold\n{profiles.END}\n\n## after\n"
+    doc.write_text(old)
+    profiles.update_block(doc, f"{profiles.BEGIN}\nnew\n{profiles.END}\n")
+    assert doc.read_text() == old.replace("old", "new")
+
+    def full(fd):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OSError):
+        profiles.update_block(doc, f"{profiles.BEGIN}\nnewer, cut short\n{profiles.END}\n")
+    assert doc.read_text() == old.replace("old", "new") and [p.name for p in tmp_path.iterdir()] == ["accuracy.md"]
+
+
 def test_profiles_measure_a_photo_at_the_viewing_size(tmp_path):
     """`bench accuracy --profiles tiny,nosuch` on a folder with one small photo: the photo is run with
     --use base_pano, scored against itself at 192 px, timed from the run records; nosuch is skipped
