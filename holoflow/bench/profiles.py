@@ -15,10 +15,11 @@ define, or one that needs a GPU or model weights absent here, is skipped with a 
 nothing is faked.
 
 Writes a markdown block (the table with each profile's goals and pictures' links) into ``--doc``
-between ``BEGIN`` / ``END`` markers (the rest of the file is kept), pictures
+between ``BEGIN`` / ``END`` markers once every run is scored (the rest of the file is kept; written
+atomically, so a stopped bench leaves the last table standing), pictures
 ``viewing-<case>-<profile>-{base,novel}.jpg`` (JPEG 90: photographs) and, for a truth set,
 ``truth-<case>-<profile>-ring-<r>.jpg`` (truth above render) into ``--pictures``, and with
-``--json`` every number.
+``--json`` every number, run by run.
 """
 
 from __future__ import annotations
@@ -361,11 +362,12 @@ def update_block(path: Path, block: str, begin: str = BEGIN, end: str = END) -> 
     write_atomic(path, replace_block(path.read_text() if path.is_file() else "", block, begin, end))
 
 
-def write(args, block: str, runs: list[dict], skipped: list[str], notes: list[str]) -> None:
-    """The block into ``--doc`` (``replace_block``) and every number into ``--json``, when given."""
+def write(args, block: str | None, runs: list[dict], skipped: list[str], notes: list[str]) -> None:
+    """The block into ``--doc`` (``update_block``; None: the document is left as it is) and every number
+    into ``--json``, when given."""
     from holoflow.evaluation.machine import machine
 
-    if args.doc:
+    if args.doc and block is not None:
         update_block(args.doc, block)
     if args.json:
         args.json.write_text(
@@ -424,7 +426,7 @@ def run(args) -> int:
                     name = f"truth-{case.name}-{p}-ring-{key}.jpg"
                     (args.pictures / name).write_bytes(encode(ring_strip(truth, render, side=192), "jpeg", 90))
                     pics[f"{case.name} ({p}) truth | render {key} m"] = (name,)
-            write(args, markdown(rows, skipped, notes, args, machine(), pics), everything, skipped, notes)
+            write(args, None, everything, skipped, notes)  # a stopped bench leaves its runs in --json
     block = markdown(rows, skipped, notes, args, machine(), pics)
     write(args, block, everything, skipped, notes)
     print(block)
