@@ -33,3 +33,29 @@ def test_a_sweep_without_a_truth_set_or_with_an_unknown_point_says_why(tiny_trut
     assert "no truth set" in capsys.readouterr().err
     assert acc.main(["--walk", "--truth", str(tiny_truth_set), "--points", "base,warp-9"]) == 2
     assert "unknown point(s) ['warp-9']" in capsys.readouterr().err
+
+
+def test_a_stopped_sweep_leaves_the_last_table_and_its_rows_in_json(tiny_truth_set, tmp_path, monkeypatch):
+    import pytest
+
+    from holoflow.bench import accuracy as acc
+    from holoflow.bench import walking
+    from holoflow.bench.walking import BEGIN, END
+
+    doc, out = tmp_path / "acc.md", tmp_path / "w.json"
+    old = f"# kept\n\n{BEGIN}\nthe last whole table\n{END}\n"
+    doc.write_text(old)
+    real, calls = walking.measure, []
+
+    def stops_on_the_second(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # Ctrl-C, or a full disk
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(walking, "measure", stops_on_the_second)
+    argv = ["--walk", "--walk-profile", "tiny", "--truth", str(tiny_truth_set), "--points", "base,no-layer"]
+    with pytest.raises(KeyboardInterrupt):
+        acc.main(argv + ["--store", str(tmp_path / "store"), "--doc", str(doc), "--json", str(out)])
+    assert doc.read_text() == old
+    assert [r["point"] for r in json.loads(out.read_text())["rows"]] == ["base"]
