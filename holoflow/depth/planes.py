@@ -41,6 +41,8 @@ BEYOND = 0.2
 #: (relative) of it and cross no depth step over ``GROW_STEP`` (relative, 3 x 3 px): ``grow_planes``
 GROW_TOL = 0.25
 GROW_STEP = 0.05
+#: the planes and the bias are found on the depth at most this wide (``refine_with_planes``)
+WORK_WIDTH = 1024
 #: relative engines whose depth carries a network's blur and low-frequency bias (``refine: auto`` mends it)
 BIASED_ENGINES = ("depth_anything", "simulated")
 
@@ -311,7 +313,12 @@ def _solve_offsets(edges: list, n: int, ground: int, x_ground: float, free: set)
 
 
 def refine_with_planes(
-    depth: np.ndarray, tol: float = 0.1, snap: float = 0.05, sigma_frac: float = 1 / 128, yaw: float | None = None
+    depth: np.ndarray,
+    tol: float = 0.1,
+    snap: float = 0.05,
+    sigma_frac: float = 1 / 128,
+    yaw: float | None = None,
+    work_width: int = WORK_WIDTH,
 ) -> tuple:
     """Radial depth [H, W] (metres, +inf sky) straightened by the room's planes, and facts (dict: the
     planes, the share of the panorama on them and of it grown, the correction's range).
@@ -327,6 +334,9 @@ def refine_with_planes(
        are off by ~20 deg (median) pixel to pixel, and a plane left a patchwork of laid and unlaid pixels
        has a step at every seam, a crack one step away; each plane then grows over the pixels connected
        to it that face its way and cross no depth step (``grow_planes``), which it takes too.
+    Steps 1 and 2 run on the depth shrunk to at most ``work_width`` pixels across (``shrink_depth``):
+    a normal is fitted over a few pixels, so on a finer grid a network's pixel noise tilts it further
+    and the planes would find less of the room the wider the panorama; step 3 runs at full width.
     When the planes cover under ``MIN_ROOM`` of the sphere (an open landscape, curved surfaces) the
     depth is returned unchanged."""
     import torch
@@ -336,18 +346,56 @@ def refine_with_planes(
 
     depth = np.asarray(depth, np.float64)
     H, W = depth.shape
+    work = depth if W <= work_width else shrink_depth(depth, work_width)
+    found = _room_planes(work, tol, sigma_frac, yaw)
+    if found is None:  # not a room: an open scene, or curved surfaces
+        return depth, {"planes": [], "on_planes": 0.0, "note": f"planes cover under {MIN_ROOM:.0%}: not a room"}
+    planes, facts, log_c, normals = found
+    finite = np.isfinite(depth) & (depth > 0)
+    if work is not depth:  # the correction is smooth: enlarged bilinearly; the normals at full width
+        import cv2
+
+        log_c = cv2.resize(log_c, (W, H), interpolation=cv2.INTER_LINEAR)
+        normals = surface_normals(torch.from_numpy(depth)).numpy()
+    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
+    out = np.where(finite, depth * np.exp(log_c), depth)
+    _, snapped = plane_depth_ratio(dirs, out, None, planes, snap)
+    on = grow_planes(dirs, out, normals, planes, snapped, sigma=2.0 * W / work.shape[1])
+    ratio, _ = plane_depth_ratio(dirs, out, None, planes, np.inf, on)
+    out = np.where(on >= 0, out * ratio, out)
+    weight = _solid_angle(H, W) * finite
+    facts = {
+        "planes": facts["planes"],
+        "on_planes": float(weight[on >= 0].sum()),
+        "grown": float(weight[(on >= 0) & (snapped < 0)].sum()),
+        "yaw_deg": facts["yaw_deg"],
+        "correction": [float(np.exp(log_c[finite].min())), float(np.exp(log_c[finite].max()))],
+    }
+    if work is not depth:
+        facts["work_width"] = int(work.shape[1])
+    return out, facts
+
+
+def _room_planes(depth: np.ndarray, tol: float, sigma_frac: float, yaw: float | None):
+    """Steps 1-2 of ``refine_with_planes`` on radial depth [H, W]: (the planes with their offsets, facts,
+    the log of the bias correction [H, W], the normals [H, W, 3]), or None when the planes cover under
+    ``MIN_ROOM`` of the sphere."""
+    import torch
+
+    from holoflow.geometry.sphere import equirect_directions
+    from holoflow.geometry.surfaces import surface_normals
+
+    H, W = depth.shape
     dirs = equirect_directions(H, W, dtype=torch.float64).numpy()  # [H, W, 3]
     finite = np.isfinite(depth) & (depth > 0)
-    lat = (0.5 - (np.arange(H) + 0.5) / H) * np.pi
-    weight = np.broadcast_to(np.cos(lat)[:, None], (H, W)) * finite
-    weight = weight / (np.cos(lat).sum() * W)  # a share of the sphere
+    weight = _solid_angle(H, W) * finite  # a share of the sphere
     normals = surface_normals(torch.from_numpy(depth)).numpy()  # [H, W, 3]
     pts = dirs * np.where(finite, depth, 0.0)[..., None]
     keep = finite.reshape(-1)
     axes = room_axes(normals, weight, yaw)
     planes = find_planes(pts.reshape(-1, 3)[keep], normals.reshape(-1, 3)[keep], weight.reshape(-1)[keep], axes, tol)
-    if sum(p[2] for p in planes) < MIN_ROOM:  # not a room: an open scene, or curved surfaces
-        return depth, {"planes": [], "on_planes": 0.0, "note": f"planes cover under {MIN_ROOM:.0%}: not a room"}
+    if sum(p[2] for p in planes) < MIN_ROOM:
+        return None
     ratio, which = plane_depth_ratio(dirs, depth, normals, planes, tol)
     floors = [i for i, p in enumerate(planes) if is_floor(p[0], p[1])]
     fitted, contacts = [p[1] for p in planes], [0] * len(planes)
@@ -357,11 +405,6 @@ def refine_with_planes(
         planes = [(p[0], o, p[2]) for p, o in zip(planes, offsets)]
         ratio, _ = plane_depth_ratio(dirs, depth, normals, planes, np.inf, which)
     log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * W)
-    out = np.where(finite, depth * np.exp(log_c), depth)
-    _, snapped = plane_depth_ratio(dirs, out, None, planes, snap)
-    on = grow_planes(dirs, out, normals, planes, snapped)
-    ratio, _ = plane_depth_ratio(dirs, out, None, planes, np.inf, on)
-    out = np.where(on >= 0, out * ratio, out)
     facts = {
         "planes": [
             {
@@ -374,12 +417,30 @@ def refine_with_planes(
             }
             for p, f, c, b in zip(planes, fitted, contacts, bounds)
         ],
-        "on_planes": float(weight[on >= 0].sum()),
-        "grown": float(weight[(on >= 0) & (snapped < 0)].sum()),
         "yaw_deg": round(float(np.degrees(np.arctan2(axes[1][0], axes[1][2]))), 3),
-        "correction": [float(np.exp(log_c[finite].min())), float(np.exp(log_c[finite].max()))],
     }
-    return out, facts
+    return planes, facts, log_c, normals
+
+
+def shrink_depth(depth: np.ndarray, width: int) -> np.ndarray:
+    """Radial depth [H, W] (metres, +inf sky) shrunk to ``width`` px across (height in proportion): each
+    pixel the geometric mean of the finite depths it covers (area weights), sky where over half of it is
+    sky."""
+    import cv2
+
+    H, W = depth.shape
+    height = max(1, round(H * width / W))
+    finite = np.isfinite(depth) & (depth > 0)
+    log_d = np.where(finite, np.log(np.where(finite, depth, 1.0)), 0.0)
+    share = cv2.resize(finite.astype(np.float64), (width, height), interpolation=cv2.INTER_AREA)
+    mean = cv2.resize(log_d, (width, height), interpolation=cv2.INTER_AREA) / np.maximum(share, 1e-12)
+    return np.where(share > 0.5, np.exp(mean), np.inf)
+
+
+def _solid_angle(H: int, W: int) -> np.ndarray:
+    """Each equirect pixel's share of the sphere [H, W] (rows by the cosine of their latitude)."""
+    lat = (0.5 - (np.arange(H) + 0.5) / H) * np.pi
+    return np.broadcast_to(np.cos(lat)[:, None] / (np.cos(lat).sum() * W), (H, W))
 
 
 def grow_planes(

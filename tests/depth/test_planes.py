@@ -230,3 +230,21 @@ def test_a_floor_bent_by_a_bias_is_still_the_floor(height, kept):
     assert (len(planes) == 1) is kept
     if kept:
         assert planes[0][0][1] == 1.0 and abs(planes[0][1] / height - 1) < 0.05
+
+
+def test_a_wide_panorama_is_straightened_as_the_narrow_one():
+    """A network's noise is as wide as the pixels it saw: on a panorama four times wider it spans 4 x 4
+    px, which tilts normals fitted over a few pixels off the walls until the planes find no room. They
+    are found on the depth shrunk to ``work_width``, so the wide panorama comes out as the narrow one."""
+    H, W, k = 128, 256, 4
+    noise = np.random.default_rng(0).normal(0.0, 0.04, (H, W))
+    narrow_truth, truth = turned_room(H, W), turned_room(H * k, W * k)
+    narrow = narrow_truth * bias_field(H, W) * np.exp(noise)
+    wide = truth * bias_field(H * k, W * k) * np.exp(np.kron(noise, np.ones((k, k))))
+    out_narrow, _ = refine_with_planes(narrow)
+    out, facts = refine_with_planes(wide, work_width=W)
+    assert facts["work_width"] == W and facts["on_planes"] > 0.8
+    assert abs_rel(out, truth) < 0.5 * abs_rel(wide, truth)
+    assert abs_rel(out, truth) < 1.25 * abs_rel(out_narrow, narrow_truth)
+    _, full = refine_with_planes(wide, work_width=W * k)  # the planes sought at full width
+    assert full["on_planes"] == 0.0 and "not a room" in full["note"]
