@@ -43,6 +43,10 @@ GROW_TOL = 0.25
 GROW_STEP = 0.05
 #: the planes and the bias are found on the depth at most this wide (``refine_with_planes``)
 WORK_WIDTH = 1024
+#: the bias correction: where no plane pixel is near, the planes' spread this many times wider
+#: (``spread_log_ratio``), except within ``NEAR_SKY`` x width pixels of the sky (a window's frame)
+WIDE_SPREAD = 4.0
+NEAR_SKY = 12 / 1024
 #: relative engines whose depth carries a network's blur and low-frequency bias (``refine: auto`` mends it)
 BIASED_ENGINES = ("depth_anything", "simulated")
 
@@ -187,17 +191,35 @@ def plane_depth_ratio(
     return ratio, which
 
 
-def spread_log_ratio(log_ratio: np.ndarray, known: np.ndarray, sigma: float, fade: float = 0.2) -> np.ndarray:
+def spread_log_ratio(
+    log_ratio: np.ndarray,
+    known: np.ndarray,
+    sigma: float,
+    fade: float = 0.2,
+    wide: float = WIDE_SPREAD,
+    local: np.ndarray | None = None,
+) -> np.ndarray:
     """log_ratio [H, W] known on ``known`` [H, W] spread over the panorama by normalized Gaussian
-    convolution (``sigma`` pixels; columns wrap, rows clamp); it fades to 0 (no correction) where the
-    known pixels' local density is below ``fade``."""
+    convolution (``sigma`` pixels; columns wrap, rows clamp). Where the known pixels' local density is
+    below ``fade`` it blends into the same spread ``wide`` times wider, which itself fades to 0 (no
+    correction) where its density is below ``fade``; pixels of ``local`` [H, W] (bool) take no part of
+    the wide spread and fade to 0 with the narrow one."""
     import scipy.ndimage as ndi
 
     mode = ("nearest", "wrap")
     w = known.astype(np.float64)
-    num = ndi.gaussian_filter(np.where(known, log_ratio, 0.0), sigma, mode=mode)
-    den = ndi.gaussian_filter(w, sigma, mode=mode)
-    return num / np.maximum(den, 1e-12) * np.clip(den / fade, 0.0, 1.0)
+    samples = np.where(known, log_ratio, 0.0)
+
+    def spread(s: float) -> tuple[np.ndarray, np.ndarray]:
+        den = ndi.gaussian_filter(w, s, mode=mode)
+        return ndi.gaussian_filter(samples, s, mode=mode) / np.maximum(den, 1e-12), np.clip(den / fade, 0.0, 1.0)
+
+    near, a = spread(sigma)
+    if wide <= 1:
+        return near * a
+    far, b = spread(wide * sigma)
+    fallback = far * b if local is None else np.where(local, 0.0, far * b)
+    return a * near + (1.0 - a) * fallback
 
 
 def contact_offsets(
@@ -329,7 +351,9 @@ def refine_with_planes(
        keeps its fitted offset, every other plane that bounds the room (``bounds_room``) takes the
        offset its contacts imply (``contact_offsets``), furniture keeps its fit;
     2. on the plane pixels the ratio plane / depth samples the network's low-frequency bias: its log,
-       spread over the panorama with a Gaussian of ``sigma_frac`` x width pixels, multiplies every pixel;
+       spread over the panorama with a Gaussian of ``sigma_frac`` x width pixels (``WIDE_SPREAD`` times
+       wider where no plane pixel is near, but not at the sky's edge: ``spread_log_ratio``), multiplies
+       every pixel;
     3. pixels within ``snap`` of a plane are laid on it, whatever their normal says: a network's normals
        are off by ~20 deg (median) pixel to pixel, and a plane left a patchwork of laid and unlaid pixels
        has a step at every seam, a crack one step away; each plane then grows over the pixels connected
@@ -404,7 +428,12 @@ def _room_planes(depth: np.ndarray, tol: float, sigma_frac: float, yaw: float | 
         offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol, bounds=bounds)
         planes = [(p[0], o, p[2]) for p, o in zip(planes, offsets)]
         ratio, _ = plane_depth_ratio(dirs, depth, normals, planes, np.inf, which)
-    log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * W)
+    near_sky = None
+    if not finite.all():  # openings: their frames keep the narrow correction only
+        import scipy.ndimage as ndi
+
+        near_sky = ndi.distance_transform_edt(finite) <= NEAR_SKY * W
+    log_c = spread_log_ratio(np.log(ratio), which >= 0, sigma_frac * W, local=near_sky)
     facts = {
         "planes": [
             {

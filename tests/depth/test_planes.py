@@ -15,6 +15,7 @@ from holoflow.depth.planes import (
     plane_distance,
     refine_with_planes,
     room_axes,
+    spread_log_ratio,
     wanted,
 )
 from holoflow.geometry.sphere import equirect_directions
@@ -248,3 +249,49 @@ def test_a_wide_panorama_is_straightened_as_the_narrow_one():
     assert abs_rel(out, truth) < 1.25 * abs_rel(out_narrow, narrow_truth)
     _, full = refine_with_planes(wide, work_width=W * k)  # the planes sought at full width
     assert full["on_planes"] == 0.0 and "not a room" in full["note"]
+
+
+def pillar_room(H: int = 128, W: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """``turned_room`` with a round pillar (0.55 m radius, floor to ceiling) 1.6 m ahead: radial depth
+    [H, W] and the pillar's pixels [H, W]."""
+    room = turned_room(H, W)
+    d = equirect_directions(H, W, dtype=torch.float64).numpy()
+    a = d[..., 0] ** 2 + d[..., 2] ** 2
+    b, c = -2 * 1.6 * d[..., 2], 1.6**2 - 0.55**2
+    disc = b**2 - 4 * a * c
+    t = np.where(disc > 0, (-b - np.sqrt(np.maximum(disc, 0.0))) / (2 * np.maximum(a, 1e-12)), np.inf)
+    t = np.where((t > 0) & (d[..., 1] * t > LO[1]) & (d[..., 1] * t < HI[1]), t, np.inf)
+    return np.minimum(room, t), t < room
+
+
+def test_an_object_with_no_plane_near_takes_the_planes_regional_correction():
+    """A round pillar is no plane and spans more than the narrow spread reaches: without the wide spread
+    its middle keeps the whole bias; with it, the planes' correction around it."""
+    truth, pillar = pillar_room()
+    bent = truth * bias_field(*truth.shape) * np.exp(np.random.default_rng(0).normal(0, 0.01, truth.shape))
+    out, _ = refine_with_planes(bent)
+    with pytest.MonkeyPatch.context() as mp:
+        import holoflow.depth.planes as planes
+
+        narrow = planes.spread_log_ratio
+        mp.setattr(planes, "spread_log_ratio", lambda *a, **k: narrow(*a, **{**k, "wide": 1.0}))
+        out_narrow, _ = refine_with_planes(bent)
+    err = abs_rel(out[pillar], truth[pillar])
+    assert err < 0.7 * abs_rel(out_narrow[pillar], truth[pillar]) and err < 0.6 * abs_rel(bent[pillar], truth[pillar])
+    assert abs_rel(out, truth) <= abs_rel(out_narrow, truth)
+
+
+def test_the_spread_falls_back_to_the_wide_one_except_where_local():
+    """Known samples on the left: just past the narrow spread's reach the correction is the wide
+    spread's, on ``local`` pixels none; near the samples both are the narrow spread's."""
+    H, W = 64, 256
+    known = np.zeros((H, W), bool)
+    known[:, 20:60] = True
+    log_ratio = np.full((H, W), 0.05)
+    local = np.zeros((H, W), bool)
+    local[:, 90:] = True
+    out = spread_log_ratio(log_ratio, known, 4.0, local=local)
+    narrow = spread_log_ratio(log_ratio, known, 4.0, wide=1.0)
+    assert np.allclose(out[:, 30:50], 0.05) and np.allclose(narrow[:, 30:50], 0.05)
+    assert np.all(out[:, 72] > 0.04) and np.all(narrow[:, 72] < 0.002)  # 13 px past the samples: 3 sigma
+    assert np.all(out[:, 95] < 1e-6)  # local: the narrow spread's, faded to none
