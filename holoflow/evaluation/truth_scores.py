@@ -15,6 +15,11 @@ colour clamped to [0, 1]. Per ring (cameras.json ``ring``):
   share of finite-truth pixels that had a rendered depth;
 - ``empty``: fraction of pixels with alpha < ``empty_alpha`` (0.5); ``cracked``: alpha < ``crack_alpha``
   (0.9);
+- ``edges``: the fraction of pixels within ``EDGE_REACH`` px of a depth edge of the truth view
+  (``depth_edges``: a step of over ``EDGE_JUMP`` between neighbours, or the sky's border), ``psnr_edges``
+  / ``psnr_surfaces`` over them and over the rest: a geometry a little off shifts what the eye sees by a
+  pixel or two, which costs at the edges (a frame over the sky, a shelf over the wall) and barely on the
+  smooth surfaces between them;
 - with the set's panorama (``pano_z.exr``): ``unseen``, the fraction of pixels whose surface the
   panorama's centre never saw (``seen_from_centre``: behind something else from there, or sky where the
   centre saw a frame), ``psnr_seen`` / ``psnr_unseen`` over each part, and ``psnr_panorama``: the
@@ -37,6 +42,8 @@ EMPTY_ALPHA = 0.5
 CRACK_ALPHA = 0.9
 DELTA = 1.25
 SEEN_TOL = 0.01  # relative (+ 1 cm): a surface point this near the panorama's depth in its direction was seen
+EDGE_JUMP = 0.05  # relative camera-z step between neighbouring truth pixels that is a depth edge
+EDGE_REACH = 2  # px: the edges' band reaches this far to either side
 
 
 def per_view_psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -78,6 +85,28 @@ def depth_errors(
         coverage=n / max(int(finite.sum()), 1),
         pixels=n,
     )
+
+
+def depth_edges(z: torch.Tensor, jump: float = EDGE_JUMP, reach: int = EDGE_REACH) -> torch.Tensor:
+    """Pixels [V, H, W] bool within ``reach`` px (a square window) of a pixel on a depth edge of truth
+    camera z [V, H, W] (metres, +inf / NaN = sky): one of two 4-neighbours whose z differ by more than
+    ``jump`` (relative), or one finite and one not. A straight edge's band is 2 ``reach`` + 2 px wide."""
+    import torch.nn.functional as F
+
+    t = z.double()
+    finite = torch.isfinite(t) & (t > 0)
+    lt = torch.log(torch.where(finite, t, torch.ones_like(t)))
+    step = math.log1p(jump)
+    edge = torch.zeros_like(finite)
+    for dim in (1, 2):
+        n = t.shape[dim] - 1
+        a, b = lt.narrow(dim, 0, n), lt.narrow(dim, 1, n)
+        fa, fb = finite.narrow(dim, 0, n), finite.narrow(dim, 1, n)
+        cut = (fa != fb) | (fa & fb & ((a - b).abs() > step))
+        edge.narrow(dim, 0, n).logical_or_(cut)
+        edge.narrow(dim, 1, n).logical_or_(cut)
+    k = 2 * reach + 1
+    return F.max_pool2d(edge[:, None].double(), k, stride=1, padding=reach)[:, 0] > 0
 
 
 def surface_points(viewmats: torch.Tensor, K: torch.Tensor, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -153,6 +182,12 @@ def ring_scores(
         per_view_cracked=[round(float(x), 5) for x in (alpha < crack_alpha).double().flatten(1).mean(1)],
     )
     out.update(depth_errors(depth, alpha, truth_z, empty_alpha))
+    edges = depth_edges(truth_z)
+    out.update(
+        edges=float(edges.double().mean()),
+        psnr_edges=pooled_psnr(rgb, truth_rgb, edges),
+        psnr_surfaces=pooled_psnr(rgb, truth_rgb, ~edges),
+    )
     if seen is not None:
         out.update(
             unseen=float((~seen).double().mean()),
@@ -241,8 +276,8 @@ def ring_table(scores: dict) -> list[str]:
     """The ring table as text lines: one row per ring."""
     head = (
         f"  {'ring':>6s} {'views':>5s} {'PSNR dB':>8s} {'mean':>7s} {'SSIM':>7s} {'AbsRel':>7s} {'d<1.25':>7s}"
-        f" {'scale':>6s} {'empty %':>8s} {'a<0.9 %':>8s} {'unseen %':>8s} {'seen dB':>8s} {'unseen dB':>9s}"
-        f" {'pano dB':>8s}"
+        f" {'scale':>6s} {'empty %':>8s} {'a<0.9 %':>8s} {'edges %':>8s} {'edge dB':>8s} {'surf dB':>8s}"
+        f" {'unseen %':>8s} {'seen dB':>8s} {'unseen dB':>9s} {'pano dB':>8s}"
     )
     rows = [
         f"truth set {scores['truth']} ({scores['views']} views, {scores['size'][0]}x{scores['size'][1]} px); "
@@ -255,7 +290,8 @@ def ring_table(scores: dict) -> list[str]:
             f" {_f(r['psnr_mean'], '{:.2f}'):>7s} {_f(r['ssim'], '{:.4f}'):>7s}"
             f" {_f(r['abs_rel'], '{:.4f}'):>7s} {_f(r['delta1'], '{:.4f}'):>7s}"
             f" {_f(r.get('scale'), '{:.3f}'):>6s} {_f(100 * r['empty'], '{:.2f}'):>8s}"
-            f" {_f(100 * r['cracked'], '{:.2f}'):>8s}"
+            f" {_f(100 * r['cracked'], '{:.2f}'):>8s} {_f(_pct(r.get('edges')), '{:.2f}'):>8s}"
+            f" {_f(r.get('psnr_edges'), '{:.2f}'):>8s} {_f(r.get('psnr_surfaces'), '{:.2f}'):>8s}"
             f" {_f(_pct(r.get('unseen')), '{:.2f}'):>8s} {_f(r.get('psnr_seen'), '{:.2f}'):>8s}"
             f" {_f(r.get('psnr_unseen'), '{:.2f}'):>9s} {_f(r.get('psnr_panorama'), '{:.2f}'):>8s}"
         )
@@ -263,7 +299,9 @@ def ring_table(scores: dict) -> list[str]:
         "PSNR: pooled over the ring's pixels (mean: of the per-view values), sRGB; AbsRel / d<1.25 / scale "
         f"(median z / Z): rendered camera z vs the views' Z (finite truth, alpha >= {EMPTY_ALPHA}); "
         f"empty: alpha < {EMPTY_ALPHA}; "
-        f"a<0.9: alpha < {CRACK_ALPHA}; unseen: surfaces the panorama's centre never saw (seen / unseen dB: "
+        f"a<0.9: alpha < {CRACK_ALPHA}; edges: pixels within {EDGE_REACH} px of a depth edge of the truth "
+        f"(a step over {EDGE_JUMP:.0%} or the sky's border; edge / surf dB: PSNR over them and over the rest); "
+        "unseen: surfaces the panorama's centre never saw (seen / unseen dB: "
         "PSNR over each part); pano dB: the panorama itself at the seen surfaces' exact directions, the "
         "ceiling of a scene built from it."
     )

@@ -213,3 +213,31 @@ def test_scoring_with_gsplat_matches_the_cpu_rasterizer(tmp_path):
     cuda, _ = ts.score_truth(tmp_path / "scene.ply", tmp_path / "t", "gsplat")  # the model is moved to the GPU
     for ring in ("0", "0.5"):
         assert abs(cuda["rings"][ring]["psnr"] - cpu["rings"][ring]["psnr"]) < 0.05, ring
+
+
+def test_depth_edges_band_a_box_and_the_sky_not_a_slanted_wall():
+    """depth_edges: a box 1 m away before a wall 3 m away and a strip of sky give bands 2 reach + 2 px wide
+    along their borders (the pixels either side of a step, widened by ``reach``); a wall slanting away
+    (z rising 2 % a pixel) has no edge."""
+    z = torch.linspace(2.0, 2.0 * 1.02**31, 32).expand(1, 32, 32).clone()  # [1, 32, 32] slanting, columns
+    z[0, 10:20, 10:20] = 1.0  # the box
+    z[0, :3] = math.inf  # sky over the top rows
+    edges = ts.depth_edges(z, reach=1)
+    assert bool(edges[0, 9:21, 9:21].all()) is False  # the box's inside is no edge
+    assert bool(edges[0, 9:12, 9:21].all()) and bool(edges[0, 18:21, 9:21].all())  # top and bottom borders
+    assert bool(edges[0, 10:20, 9:12].all()) and bool(edges[0, 10:20, 18:21].all())  # left and right
+    assert not bool(edges[0, 12:18, 12:18].any())
+    assert bool(edges[0, 1:5].all())  # the sky's border (rows 2 | 3), widened by one px
+    assert not bool(edges[0, 5:8].any()) and not bool(edges[0, 22:].any())  # the slanting wall
+
+
+def test_ring_scores_split_the_error_between_edges_and_surfaces():
+    """A render wrong only along the box's silhouette loses PSNR on the edges and none on the surfaces."""
+    z = torch.full((1, 32, 32), 3.0)
+    z[0, 10:20, 10:20] = 1.0
+    truth = torch.rand(1, 32, 32, 3, generator=torch.Generator().manual_seed(0))
+    render = truth.clone()
+    render[0, 10:20, 10] = 1.0 - render[0, 10:20, 10]  # the box's left column, shifted colours
+    out = ts.ring_scores(render, torch.ones(1, 32, 32), z, truth, z)
+    assert out["psnr_surfaces"] == math.inf and math.isfinite(out["psnr_edges"])
+    assert out["edges"] == pytest.approx(float(ts.depth_edges(z).double().mean()))
