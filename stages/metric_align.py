@@ -3,10 +3,11 @@ into radial disparity references; one global scale + offset maps the blended dis
 (Huber IRLS on relative residuals); blended pixels at the sky's border that are mostly sky are made
 sky (docs/depth.md, step 6); a network's depth then gets sharp steps (holoflow/depth/edges.py) and is
 straightened by the room's planes (holoflow/depth/planes.py; param ``refine``). Writes depth.exr (Z =
-radial metres, +inf sky) and metric_align.json (scale, offset, residuals, faces used, the refinement's
-facts); with a truth depth it records AbsRel, RMSE and delta1 of the result (docs/depth.md). Engine
-``given`` (``auto`` on a panorama imported with its own Z channel): the given Z, resized to the
-disparity's grid (nearest), is the depth as it is."""
+radial metres, +inf sky; a refined depth's header says the noise it had before the planes,
+``holoflow.depth_noise``, for point_cloud's smoothing) and metric_align.json (scale, offset, residuals,
+faces used, the refinement's facts); with a truth depth it records AbsRel, RMSE and delta1 of the
+result (docs/depth.md). Engine ``given`` (``auto`` on a panorama imported with its own Z channel):
+the given Z, resized to the disparity's grid (nearest), is the depth as it is."""
 
 from __future__ import annotations
 
@@ -53,6 +54,7 @@ def main() -> int:
             "holoflow.depth_kind": "radial",
             "holoflow.engine": facts["engine"],
             "holoflow.simulation": int(bool(facts.get("simulation"))),
+            **({"holoflow.depth_noise": report["depth_noise"]} if "depth_noise" in report else {}),
         },
     )
     job.output("metric_align.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")

@@ -31,7 +31,9 @@ def main() -> int:
     kind = attrs.get("holoflow.depth_kind", "radial")
     if kind != "radial":
         raise ValueError(f"depth.exr holds {kind} depth; point_cloud needs radial (equirect) depth")
-    result = point_clouds(rgb, torch.from_numpy(channels["Z"]), cfg, job.progress)  # radial m, inf = sky
+    noise = attrs.get("holoflow.depth_noise")  # a network's noise before metric_align laid the planes
+    depth = torch.from_numpy(channels["Z"])  # radial m, inf = sky
+    result = point_clouds(rgb, depth, cfg, job.progress, None if noise is None else float(noise))
     for name, cloud in result.clouds.items():
         normals = None if cloud.normals is None else cloud.normals.float().numpy()
         write_points(job.output(f"{name}.ply"), cloud.xyz.float().numpy(), cloud.rgb.numpy(), normals)

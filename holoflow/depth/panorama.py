@@ -205,7 +205,12 @@ def metric_from_disparity(
         depth = np.where(fit["scale"] * disparity + fit["offset"] < limit, np.inf, depth)
     depth = sky_mixed_edges(depth)
     if planes.wanted(cfg.refine, relative_engine) and depth.shape[1] >= planes.MIN_WIDTH:
+        import torch
+
+        from holoflow.geometry.surfaces import depth_noise
+
         depth, fit["sharpened"] = sharpen_edges(depth)
+        fit["depth_noise"] = depth_noise(torch.from_numpy(depth))  # what the planes will hide (point_cloud)
         yaw = None
         if cfg.room_yaw == "lines":
             from holoflow.depth.layout import room_yaw

@@ -88,9 +88,13 @@ class Clouds:
     meta: dict = field(default_factory=dict)
 
 
-def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudParams, progress=None) -> Clouds:
+def point_clouds(
+    rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudParams, progress=None, noise: float | None = None
+) -> Clouds:
     """P0, P_f and P_s (module docstring) of rgb [H, W, 3] (linear) and radial_depth [Hd, Wd] (metres,
-    inf = sky). progress(done, total, what) is called after each cloud."""
+    inf = sky); ``noise``: the depth's per-pixel noise (relative) when its maker knows it (metric_align's
+    ``holoflow.depth_noise``: a network's, measured before the room's planes replaced most of it), else
+    measured here. progress(done, total, what) is called after each cloud."""
     depth = radial_depth.double()
     sky_fraction = float((~(torch.isfinite(depth) & (depth > 0))).double().mean())
     shell = cfg.sky_radius if cfg.sky_radius > 0 else far_shell_radius(depth)
@@ -112,7 +116,7 @@ def point_clouds(rgb: torch.Tensor, radial_depth: torch.Tensor, cfg: PointCloudP
         d = sky_to_shell(d, shell)
         if name == "pf":
             by_detail = detail is not None and detail["on"]
-            clouds[name], extra = _pf_cloud(srgb, col, d, sky, shell, cfg, by_detail)
+            clouds[name], extra = _pf_cloud(srgb, col, d, sky, shell, cfg, by_detail, noise)
             counts.update(extra.pop("counts"))
         else:
             xyz, c = equirect_to_points(col, d)
@@ -178,17 +182,19 @@ def _pf_cloud(
     shell: float,
     cfg: PointCloudParams,
     by_detail: bool = False,
+    noise: float | None = None,
 ) -> tuple[Cloud, dict]:
     """P_f from its grid col [h, w, 3] (sRGB) and d [h, w] (radial m, the sky [h, w] on its shell of
     radius ``shell``), steps 2-6 of the module docstring; ``by_detail``: sampled at full width only in
-    its most detailed tiles (holoflow/geometry/detail.py). The windows' reveals are found on the grid
+    its most detailed tiles (holoflow/geometry/detail.py); ``noise``: the depth's noise for the smoothing
+    (None: measured on d). The windows' reveals are found on the grid
     resampled to at most ``REVEAL_WIDTH``. Returns (the cloud, {"counts", "caps", "polar_detail",
     "dome_width", "reveal_width"})."""
     d_open = torch.where(sky, torch.full_like(d, math.inf), d)  # the openings' sky, for their reveals
     reveal_width = min(col.shape[1], REVEAL_WIDTH)
     sky_col = clean_sky(col, sky)  # [h, w, 3]: what lies unseen behind the room is sky, not its rims
     d = snap_depth_edges(d, cfg.edge_radius, cfg.edge_ratio, cfg.layer_tol, cfg.edge_rounds)
-    d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise)
+    d = smooth_depth(d, cfg.smooth_radius, cfg.smooth_range, cfg.smooth_noise, noise)
     normals = surface_normals(d, cfg.layer_tol)  # [h, w, 3]
     keep = depth_gradient_mask(d, cfg.grad_threshold, cfg.grad_sides == "one_sided")
     layers = []

@@ -143,9 +143,10 @@ class PointCloudParams(StageParams):
         gt=0,
     )
     smooth_noise: float = param(
-        3.0,
-        "smooth_radius: the range as a multiple of the depth's per-pixel noise "
-        "(holoflow/geometry/surfaces.py depth_noise; exact depth is then left nearly as "
+        10.0,
+        "smooth_radius: the range as a multiple of the depth's per-pixel noise (its header's "
+        "holoflow.depth_noise: a network's before metric_align laid the planes, else "
+        "holoflow/geometry/surfaces.py depth_noise; exact depth is then left nearly as "
         "it is); 0 = smooth_range always",
         ge=0,
     )

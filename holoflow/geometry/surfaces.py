@@ -11,7 +11,10 @@ exp(-(delta log depth / range)^2 / 2) (a bilateral filter in log depth, columns 
 rows clamped at the poles): within a surface (neighbours within ``range`` relative) noise averages out,
 across an occlusion edge (a step of several ``range``) nothing mixes. ``range`` follows the depth's own
 noise (``depth_noise``): exact depth, whose only "noise" is the curvature of log depth over a plane,
-is left nearly unchanged (smoothing it would bend its creases), a network's is averaged.
+is left nearly unchanged (smoothing it would bend its creases), a network's is averaged. A network's
+depth that metric_align laid on the room's planes says what its noise was before (the EXR header's
+``holoflow.depth_noise``): measured after, the exact planes (most of a room) hide the noise left on
+everything off them.
 
 ``surface_normals``: the normal of each pixel's surface from the 3D points of its neighbours: along
 each image axis the one-sided difference towards the neighbour on the same surface (the smaller
@@ -55,6 +58,11 @@ def _window(xp: torch.Tensor, r: int, dy: int, dx: int) -> torch.Tensor:
     return xp[r + dy : r + dy + H, r + dx : r + dx + W]
 
 
+def _residual(logd: torch.Tensor) -> torch.Tensor:
+    """Log depth [H, W] less the mean of its four neighbours (``_shift``'s borders): [H, W]."""
+    return logd - sum(_shift(logd, dy, dx) for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0))) / 4
+
+
 def depth_noise(radial_depth: torch.Tensor, edge: float = 0.05) -> float:
     """Per-pixel noise of radial_depth [H, W] as a relative standard deviation: the median absolute
     difference between each pixel's log depth and the mean of its four neighbours (pixels with a surface,
@@ -63,25 +71,30 @@ def depth_noise(radial_depth: torch.Tensor, edge: float = 0.05) -> float:
     d = radial_depth
     valid = torch.isfinite(d) & (d > 0)
     logd = torch.log(torch.where(valid, d, torch.ones_like(d)))
-    around = sum(_shift(logd, dy, dx) for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0))) / 4
     ok = valid & _shift(valid, 0, 1) & _shift(valid, 0, -1) & _shift(valid, 1, 0) & _shift(valid, -1, 0)
-    r = (logd - around)[ok].abs()
+    r = _residual(logd)[ok].abs()
     r = r[r < edge]
     return float(1.4826 * r.median() / 1.25**0.5) if r.numel() else 0.0
 
 
 def smooth_depth(
-    radial_depth: torch.Tensor, radius: int = 2, range_rel: float = 0.05, noise_factor: float = 0.0
+    radial_depth: torch.Tensor,
+    radius: int = 2,
+    range_rel: float = 0.05,
+    noise_factor: float = 0.0,
+    noise: float | None = None,
 ) -> torch.Tensor:
     """Edge-aware smoothing of radial_depth [H, W] (metres; module docstring): [H, W], same dtype.
     radius (px): half window (0: unchanged); range_rel: relative depth difference at which a
     neighbour's weight falls to exp(-1/2); with noise_factor > 0 it is at most noise_factor x the
-    depth's own noise (``depth_noise``), so exact depth is left nearly as it is and a network's noise
-    is averaged out. Pixels without a surface are neither changed nor used."""
+    depth's noise (relative standard deviation: ``noise`` when known, else ``depth_noise``), so exact
+    depth is left nearly as it is and a network's noise is averaged out; with ``noise`` given, a pixel
+    already within a tenth of it of its four neighbours' mean (laid on a plane) keeps its depth. Pixels
+    without a surface are neither changed nor used."""
     if radius < 1:
         return radial_depth
     if noise_factor > 0:
-        range_rel = min(range_rel, noise_factor * depth_noise(radial_depth))
+        range_rel = min(range_rel, noise_factor * (depth_noise(radial_depth) if noise is None else noise))
         if range_rel <= 0:
             return radial_depth
     d = radial_depth
@@ -99,6 +112,8 @@ def smooth_depth(
             total += torch.mul(w, n, out=wn)
             weight += w
     out = torch.exp(total / weight.clamp_min(1e-30))
+    if noise is not None:  # what lies within a tenth of the noise of its neighbours was laid on a plane
+        valid &= _residual(logd).abs() >= 0.1 * noise
     return torch.where(valid, out.to(d.dtype), d)
 
 
