@@ -420,3 +420,26 @@ def test_real_engines_dispatch_with_tiny_random_models(tmp_path, room_pano):
     assert md.engine["engine"] == "zoedepth" and len(md.faces) == 2
     assert md.fit["scale"] > 0 and md.depth.shape == res.disparity.shape
     assert np.isfinite(md.depth).all() and (md.depth > 0).all()
+
+
+@pytest.mark.parametrize("relative_engine,noted", [("simulated", True), ("layout", False)])
+def test_a_refined_depth_says_the_noise_it_had_before_the_planes(relative_engine, noted):
+    """metric_align's refinement lays most of a room exactly on its planes, which leaves no noise to
+    measure; the fit records the network depth's noise from before them (point_cloud's smoothing reads
+    it from depth.exr's header), and only when it refined."""
+    import torch
+
+    from holoflow.geometry.sphere import equirect_directions
+    from holoflow.geometry.surfaces import depth_noise
+
+    dirs = equirect_directions(128, 256, dtype=torch.float64).numpy()
+    r = _scene_radial(dirs)
+    rgb = np.repeat((0.2 + 0.6 / r)[..., None], 3, -1).astype(np.float32)
+    noisy = r * np.exp(0.02 * np.random.default_rng(0).standard_normal(r.shape))
+    out = pd.metric_from_disparity(
+        1.0 / noisy, rgb, r, "simulated", MetricAlignParams(faces=4, face_size=32), relative_engine=relative_engine
+    )
+    assert ("depth_noise" in out.fit) is noted
+    if noted:
+        assert out.fit["depth_noise"] > 0.01  # the 2 % noise, not the planes' none
+        assert depth_noise(torch.from_numpy(out.depth.astype(np.float64))) < 0.5 * out.fit["depth_noise"]
