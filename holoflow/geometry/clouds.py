@@ -61,7 +61,7 @@ from holoflow.geometry.pointcloud import (
 )
 from holoflow.geometry.sampling import resize_equirect
 from holoflow.geometry.sphere import equirect_directions
-from holoflow.geometry.surfaces import smooth_depth, surface_normals
+from holoflow.geometry.surfaces import depth_noise, smooth_depth, surface_normals
 from holoflow.imageops.color import linear_to_srgb_torch
 
 SKY_RIM_PX = 2  # clean_sky: sky pixels this close to anything else mix in its colour
@@ -94,8 +94,11 @@ def point_clouds(
     """P0, P_f and P_s (module docstring) of rgb [H, W, 3] (linear) and radial_depth [Hd, Wd] (metres,
     inf = sky); ``noise``: the depth's per-pixel noise (relative) when its maker knows it (metric_align's
     ``holoflow.depth_noise``: a network's, measured before the room's planes replaced most of it), else
-    measured here. progress(done, total, what) is called after each cloud."""
+    measured on radial_depth's own grid (a cloud's resampling adds an unevenness that is no noise).
+    progress(done, total, what) is called after each cloud."""
     depth = radial_depth.double()
+    if noise is None:
+        noise = depth_noise(depth)
     sky_fraction = float((~(torch.isfinite(depth) & (depth > 0))).double().mean())
     shell = cfg.sky_radius if cfg.sky_radius > 0 else far_shell_radius(depth)
     srgb = linear_to_srgb_torch(rgb)  # clamped to [0, 1] first

@@ -146,8 +146,8 @@ class PointCloudParams(StageParams):
         10.0,
         "smooth_radius: the range as a multiple of the depth's per-pixel noise (its header's "
         "holoflow.depth_noise: a network's before metric_align laid the planes, else "
-        "holoflow/geometry/surfaces.py depth_noise; exact depth is then left nearly as "
-        "it is); 0 = smooth_range always",
+        "holoflow/geometry/surfaces.py depth_noise on the depth's own grid; exact depth is then left "
+        "nearly as it is); 0 = smooth_range always",
         ge=0,
     )
     opening_bars: bool = param(

@@ -13,8 +13,10 @@ from holoflow.geometry.area import footprint_gaussians, surface_footprint
 from holoflow.geometry.camera import intrinsics_from_fov, look_at, quat_to_rotmat
 from holoflow.geometry.clouds import point_clouds
 from holoflow.geometry.config import PointCloudParams
+from holoflow.geometry.pointcloud import resample_rgbd
 from holoflow.geometry.sphere import equirect_directions
-from holoflow.geometry.surfaces import _padded, _shift, _window, smooth_depth, surface_normals
+from holoflow.geometry.surfaces import _padded, _shift, _window, depth_noise, smooth_depth, surface_normals
+from holoflow.imageops.color import linear_to_srgb_torch
 from holoflow.recon.config import TransferOptParams
 from holoflow.recon.optimize import init_model
 from holoflow.splat import render
@@ -107,6 +109,20 @@ def test_a_known_noise_smooths_what_laid_planes_hide():
     assert err(smooth_depth(noisy, 3, 0.05, 10.0)) > 0.9 * err(noisy)  # the planes' noise: nothing to do
     assert err(smooth_depth(noisy, 3, 0.05, 10.0, noise=0.02)) < 0.5 * err(noisy)
     assert torch.equal(smooth_depth(noisy, 3, 0.05, 10.0, noise=0.0), noisy)
+
+
+def test_without_a_known_noise_the_depth_is_measured_on_its_own_grid():
+    """Exact depth (no noise in its header) enlarged onto a P_f grid 1.5 x as wide: the colour-guided
+    resampling's unevenness, measured on that grid, reads as more noise than the depth has and would
+    widen the smoothing's range until it rounds creases (grey_white_room at 1536 px: -0.3 dB at every
+    ring); point_clouds measures the noise on the depth's own grid."""
+    rgb, depth = room_with_box(64, 128)
+    pc = PointCloudParams(p0_width=128, pf_width=192, ps_width=64)
+    _, wide = resample_rgbd(linear_to_srgb_torch(rgb.float()).double(), depth, 192, guided=True)
+    assert depth_noise(wide) > 1.2 * depth_noise(depth)
+    measured = point_clouds(rgb.float(), depth, pc).clouds["pf"].xyz
+    given = point_clouds(rgb.float(), depth, pc, noise=depth_noise(depth)).clouds["pf"].xyz
+    assert torch.equal(measured, given)
 
 
 def test_surface_footprint_facing_the_centre_is_the_centre_facing_disc():
