@@ -184,13 +184,13 @@ def _pf_cloud(
     sky: torch.Tensor,
     shell: float,
     cfg: PointCloudParams,
-    by_detail: bool = False,
-    noise: float | None = None,
+    by_detail: bool,
+    noise: float,
 ) -> tuple[Cloud, dict]:
     """P_f from its grid col [h, w, 3] (sRGB) and d [h, w] (radial m, the sky [h, w] on its shell of
     radius ``shell``), steps 2-6 of the module docstring; ``by_detail``: sampled at full width only in
     its most detailed tiles (holoflow/geometry/detail.py); ``noise``: the depth's noise for the smoothing
-    (None: measured on d). The windows' reveals are found on the grid
+    (``point_clouds``'s). The windows' reveals are found on the grid
     resampled to at most ``REVEAL_WIDTH``. Returns (the cloud, {"counts", "caps", "polar_detail",
     "dome_width", "reveal_width"})."""
     d_open = torch.where(sky, torch.full_like(d, math.inf), d)  # the openings' sky, for their reveals
