@@ -100,6 +100,12 @@ class LayoutConfig:
     segment_weight: float = 20.0
     """weight of the Manhattan-aligned line segments at a wall's floor / ceiling boundary (row-cost
     units per unit of evidence); only segments along that wall's own horizontal direction count."""
+    ceiling_line_deg: float = 30.0
+    """Manhattan fit: a wall seen over at least this many degrees whose ceiling line no segment shows
+    (under 20 % of its columns) moves to the nearer wall of its direction whose ceiling line segments
+    show best (in at least 60 % of them): a sofa or a cupboard along a wall draws its top where the
+    wall's foot would be, nothing stands in front of the ceiling's edge (manhattan.nearer_ceiling_lines);
+    0 = off."""
 
 
 @dataclass
@@ -379,7 +385,7 @@ def _estimate(srgb, cfg, facts, H0, W0):
     prior = cfg.distance_prior * (np.log(dist / cfg.typical_distance) / 0.7) ** 2
     data_f = cost_f[row_f] + prior[:, None]  # [K, Wk]
     if scene == "indoor" and cfg.manhattan:
-        d = _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts)
+        d = _manhattan_walls(srgb, cost_f, cost_c, pc, h, cfg, facts)
         if d is not None:
             return _finish(d, facts["ceiling_above_eye_m"], frame)
     best = None
@@ -403,12 +409,21 @@ def _estimate(srgb, cfg, facts, H0, W0):
     return _finish(dist[k], ceiling, frame)
 
 
-def _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts):
-    """Horizontal wall distance per column [Wk] (metres) from the Manhattan wall DP (manhattan.py), or
-    None when no Manhattan yaw is found; sets facts manhattan / ceiling_above_eye_m."""
+def _manhattan_walls(srgb, cost_f, cost_c, pc, h, cfg, facts):
+    """Horizontal wall distance per column [Wk] (metres) from the Manhattan wall DP (manhattan.py), its
+    walls moved to the ceiling's lines where furniture along them mimics their foot (``ceiling_line_deg``;
+    pc [Hk, Wk]: the ceiling's colour probability), or None when no Manhattan yaw is found; sets facts
+    manhattan / ceiling_above_eye_m."""
     import scipy.ndimage as ndi
 
-    from holoflow.depth.manhattan import manhattan_dp, manhattan_yaw, segment_evidence, segment_rays, wall_distances
+    from holoflow.depth.manhattan import (
+        manhattan_dp,
+        manhattan_yaw,
+        nearer_ceiling_lines,
+        segment_evidence,
+        segment_rays,
+        wall_distances,
+    )
 
     Hk, Wk = cost_f.shape
     if cfg.region_cap > 0:  # robust data term: each column's evidence is capped above its best row
@@ -441,6 +456,15 @@ def _manhattan_walls(srgb, cost_f, cost_c, h, cfg, facts):
         if best is None or total < best[0]:
             best = (total, ceiling, path, corners)
     _, ceiling, path, corners = best
+    if cfg.ceiling_line_deg > 0:
+        rc = np.clip(np.round((np.pi / 2 - np.arctan(ceiling / dW)) / np.pi * Hk).astype(np.int64), 1, Hk - 1)
+        # a wall's ceiling line: a segment there with the wall, not more ceiling, below it (a ceiling's
+        # own tiles and lamps draw lines along the walls' directions too)
+        below = 1.0 - sum(pc[np.minimum(rc + k, Hk - 1), cols] for k in (2, 3, 4)) / 3.0  # [S, Wk]
+        support = np.where(valid, ev_c[fam, rc, cols] * below, 0.0)  # [S, Wk] each wall's ceiling line seen
+        min_run = int(np.ceil(cfg.ceiling_line_deg / 360.0 * Wk))
+        path, facts["manhattan"]["walls_to_ceiling_lines"] = nearer_ceiling_lines(path, support, len(offsets), min_run)
+        corners = int(np.count_nonzero(path != np.roll(path, 1)))
     facts["ceiling_above_eye_m"] = round(float(ceiling), 3)
     facts["manhattan"]["walls"] = corners
     return dW[path, cols[0]]

@@ -15,6 +15,9 @@ The panorama is assumed upright (tilt already corrected, ``vanishing.py``).
   (metres) is seen at horizontal distance a / cos(phi - alpha) in column phi; the DP picks one wall
   (4 orientations x offsets) per column with a constant penalty per corner, so the layout is a
   Manhattan polygon (with occlusion jumps allowed) rather than a free per-column distance.
+- ``nearer_ceiling_lines``: a wall the fit put where its foot's line is, whose ceiling line no segment
+  shows while a nearer wall's of the same direction does, moves to that nearer wall (furniture along a
+  wall draws lines where its foot would be; nothing stands in front of the ceiling's edge).
 """
 
 from __future__ import annotations
@@ -167,3 +170,32 @@ def manhattan_dp(cost: np.ndarray, corner: float) -> np.ndarray:
     for c in range(n - 1, 0, -1):
         path[c - 1] = path[c] if stay[c, path[c]] else best[c]
     return path[pad : pad + W]
+
+
+def nearer_ceiling_lines(
+    path: np.ndarray, support: np.ndarray, offsets: int, min_run: int, seen: float = 0.6, missing: float = 0.2
+) -> tuple[np.ndarray, int]:
+    """The wall states [W] of ``manhattan_dp``'s ``path`` with every run of one state over at least
+    ``min_run`` neighbouring columns (wrapping) moved to a nearer wall of the same direction when the
+    ceiling line of its own wall is seen in under ``missing`` of its columns and that of the wall with
+    the best seen line, a nearer one, in at least ``seen`` of them. ``support`` [S, W]: the ceiling-line
+    evidence (0..1) of each state in each column; states s = o ``offsets`` + k, offsets ascending (the
+    layout of ``wall_distances``). Returns (the new path [W], how many runs moved)."""
+    W = len(path)
+    path = path.copy()
+    starts = np.nonzero(path != np.roll(path, 1))[0]
+    if len(starts) == 0:
+        starts = np.array([0])
+    moved = 0
+    for i, c0 in enumerate(starts):
+        c1 = starts[(i + 1) % len(starts)]
+        run = np.arange(c0, c1 if c1 > c0 else c1 + W) % W  # [n] its columns
+        if len(run) < min_run:
+            continue
+        o, k = divmod(int(path[run[0]]), offsets)
+        score = support[o * offsets : (o + 1) * offsets][:, run].mean(1)  # [K] share of columns with a line
+        best = int(np.argmax(score))
+        if best < k and score[best] >= seen and score[k] < missing:
+            path[run] = o * offsets + best
+            moved += 1
+    return path, moved

@@ -6,7 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 from holoflow.depth.layout import LayoutConfig, estimate_layout_depth
-from holoflow.depth.manhattan import manhattan_dp, manhattan_yaw, panorama_yaw, segment_evidence, wall_distances
+from holoflow.depth.manhattan import (
+    manhattan_dp,
+    manhattan_yaw,
+    nearer_ceiling_lines,
+    panorama_yaw,
+    segment_evidence,
+    wall_distances,
+)
 
 
 def _box(H, W, yaw, walls, h=1.6, ceiling=1.1):
@@ -153,3 +160,40 @@ def test_capped_region_cost_bridges_a_block_of_contradicting_columns():
     uncapped = estimate_layout_depth(img, LayoutConfig(scene="indoor", region_cap=0.0))
     assert (np.abs(capped.depth - depth) / depth).mean() < 0.03
     assert (np.abs(uncapped.depth - depth) / depth).mean() > 0.05
+
+
+def _two_walls(K=5, W=100):
+    """A path over W columns: wall (o 0, k 1) in columns 0-59, (o 0, k 4) in 60-99; no line seen."""
+    path = np.where(np.arange(W) < 60, 1, 4)
+    return path, np.zeros((4 * K, W)), K
+
+
+def test_a_wall_without_its_ceiling_line_moves_to_the_nearer_one_that_has_it():
+    """A sofa's top taken for its wall's foot puts the wall too far, and no segment shows that far wall's
+    ceiling line while the near wall's shows over the whole run: the run moves to the near wall."""
+    path, support, K = _two_walls()
+    support[2, 60:] = 1.0  # the ceiling line of wall (0, 2), nearer than (0, 4)
+    out, moved = nearer_ceiling_lines(path, support, K, min_run=30)
+    assert moved == 1
+    assert (out[60:] == 2).all() and (out[:60] == 1).all()
+
+
+def test_a_wall_keeps_its_offset_when_its_own_line_shows_or_the_run_is_narrow_or_the_line_is_farther():
+    path, support, K = _two_walls()
+    support[2, 60:] = 1.0
+    assert nearer_ceiling_lines(path, support, K, min_run=41)[1] == 0  # a doorway's width: left alone
+    own = support.copy()
+    own[4, 60:70] = 1.0  # its own line in a quarter of its columns
+    assert nearer_ceiling_lines(path, own, K, min_run=30)[1] == 0
+    farther = np.zeros_like(support)
+    farther[3, :60] = 1.0  # the first run's best line lies farther than its wall: never moved outwards
+    out, moved = nearer_ceiling_lines(path, farther, K, min_run=30)
+    assert moved == 0 and (out == path).all()
+
+
+def test_one_wall_all_round_is_one_run():
+    K, W = 5, 64
+    path, support = np.full(W, 3), np.zeros((4 * K, W))
+    support[1] = 1.0
+    out, moved = nearer_ceiling_lines(path, support, K, min_run=10)
+    assert moved == 1 and (out == 1).all()
