@@ -454,10 +454,9 @@ def _manhattan_walls(srgb, cost_f, cost_c, pc, h, cfg, facts):
         total = float(data[path, cols[0]].sum()) + cfg.corner_penalty * corners
         total += Wk * cfg.ceiling_prior * (np.log(ceiling / cfg.typical_ceiling) / 0.5) ** 2
         if best is None or total < best[0]:
-            best = (total, ceiling, path, corners)
-    _, ceiling, path, corners = best
-    if cfg.ceiling_line_deg > 0:
-        rc = np.clip(np.round((np.pi / 2 - np.arctan(ceiling / dW)) / np.pi * Hk).astype(np.int64), 1, Hk - 1)
+            best = (total, ceiling, path, corners, rc)
+    _, ceiling, path, corners, rc = best
+    if cfg.ceiling_line_deg > 0:  # rc [S, Wk]: each wall's ceiling row at the chosen height
         # a wall's ceiling line: a segment there with the wall, not more ceiling, below it (a ceiling's
         # own tiles and lamps draw lines along the walls' directions too)
         below = 1.0 - sum(pc[np.minimum(rc + k, Hk - 1), cols] for k in (2, 3, 4)) / 3.0  # [S, Wk]
