@@ -41,6 +41,10 @@ BEYOND = 0.2
 #: (relative) of it and cross no depth step over ``GROW_STEP`` (relative, 3 x 3 px): ``grow_planes``
 GROW_TOL = 0.25
 GROW_STEP = 0.05
+#: a contact reads each plane's offset this many degrees from the crease, inside the plane: a skirting
+#: board or a cornice (about 3 deg tall across a room) lies within the plane's tolerance a few cm before
+#: it, and read on the moulding every wall would come out a per cent or so nearer than it is
+CONTACT_INSET_DEG = 3.0
 #: the planes and the bias are found on the depth at most this wide (``refine_with_planes``)
 WORK_WIDTH = 1024
 #: the bias correction: where no plane pixel is near, the planes' spread this many times wider
@@ -231,12 +235,16 @@ def contact_offsets(
     tol: float,
     gap: int = 6,
     bounds: list | None = None,
+    inset: int = 0,
 ) -> tuple[list, list]:
     """Plane offsets [P] re-derived from where the planes that bound the room (``bounds`` [P] bool,
     ``bounds_room``; None: all) meet, the offset of plane ``ground`` (the floor) held; the others keep
     their fit and their pixels count as unassigned. Two planes touch where their pixels come within
     ``gap`` pixels of each other along a row or a column, with only unassigned pixels between and the
-    depth continuous across (a real corner, not an occluding edge). A network's bias is smooth, so at a
+    depth continuous across (a real corner, not an occluding edge). Each side of a contact is read
+    ``inset`` pixels further into its own plane along that row or column, past a moulding at the crease
+    (``CONTACT_INSET_DEG``); the contact counts where that pixel lies on the plane too (its own or
+    unassigned, and within ``tol`` of the plane's fit). A network's bias is smooth, so at a
     seam it is the same on both sides, and the measured depths there have the ratio of the true offsets:
     each pair of planes that touch at ``MIN_CONTACTS`` pixel pairs or more gives one equation (the
     median over its contacts) for the log of that ratio, and all offsets are solved at once by
@@ -250,11 +258,23 @@ def contact_offsets(
         which = np.where(np.isin(which, [i for i, b in enumerate(bounds) if not b]), -1, which)
     free = which < 0
     d = np.where(np.isfinite(depth) & (depth > 0), depth, np.nan)
+    axes = np.stack([p[0] for p in planes])  # [P, 3]
+    fits = np.array([p[1] for p in planes], dtype=np.float64)  # [P]
     pairs = []  # (plane a, plane b, rays at a [M, 3], at b [M, 3], depth at a [M], at b [M])
     for axis in (0, 1):
         w, f, dd, dr = (which, free, d, dirs) if axis == 0 else (which.T, free.T, d.T, dirs.transpose(1, 0, 2))
         ld = np.log(dd)
         n = w.shape[0]
+
+        def on_plane(at: slice, label: np.ndarray) -> np.ndarray:
+            """Whether the pixels of rows ``at`` lie on plane ``label`` [...] (its own or unassigned, and
+            within tol of its fit), where a contact's side is read."""
+            cos = np.einsum("...k,...k->...", dr[at], axes[label])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = fits[label] / cos
+                near = np.abs(np.log(dd[at] / t)) < np.log1p(tol)
+            return ((w[at] == label) | (w[at] < 0)) & (t > 0) & near
+
         between = np.ones((n - 1,) + w.shape[1:], bool)  # rows r + 1 .. r + k - 1 all unassigned
         for k in range(1, gap + 1):
             if k > 1:
@@ -262,14 +282,18 @@ def contact_offsets(
             a, b = w[: n - k], w[k:]
             cont = np.abs(ld[: n - k] - ld[k:]) < np.log1p(tol)
             hit = (a >= 0) & (b >= 0) & (a != b) & between & cont
+            if n - k - 2 * inset <= 0:
+                continue
+            # a contact at rows r (a) and r + k (b) is read at r - inset and r + k + inset
+            sub, ia, ib = slice(inset, n - k - inset), slice(0, n - k - 2 * inset), slice(k + 2 * inset, n)
+            hit = hit[sub] & on_plane(ia, a[sub]) & on_plane(ib, b[sub])
             if hit.any():
-                pairs.append((a[hit], b[hit], dr[: n - k][hit], dr[k:][hit], dd[: n - k][hit], dd[k:][hit]))
+                pairs.append((a[sub][hit], b[sub][hit], dr[ia][hit], dr[ib][hit], dd[ia][hit], dd[ib][hit]))
     if not pairs:
         return offsets, count
     pa, pb, ra, rb, da, db = (np.concatenate([p[c] for p in pairs]) for c in range(6))
     # each contact says log|s_a| - log|s_b| = log q: the depth ratio true / measured carries across the
     # corner (the bias is smooth), so s_a / s_b = (r_a . axis_a) d_a / ((r_b . axis_b) d_b)
-    axes = np.stack([p[0] for p in planes])  # [P, 3]
     qa = np.einsum("mk,mk->m", ra, axes[pa]) * da
     qb = np.einsum("mk,mk->m", rb, axes[pb]) * db
     signs = np.sign([p[1] for p in planes])
@@ -425,7 +449,8 @@ def _room_planes(depth: np.ndarray, tol: float, sigma_frac: float, yaw: float | 
     fitted, contacts = [p[1] for p in planes], [0] * len(planes)
     bounds = bounds_room(dirs, depth, weight, planes, tol)
     if floors:
-        offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol, bounds=bounds)
+        inset = int(round(CONTACT_INSET_DEG / 360.0 * W))
+        offsets, contacts = contact_offsets(dirs, depth, which, planes, floors[0], tol, bounds=bounds, inset=inset)
         planes = [(p[0], o, p[2]) for p, o in zip(planes, offsets)]
         ratio, _ = plane_depth_ratio(dirs, depth, normals, planes, np.inf, which)
     near_sky = None

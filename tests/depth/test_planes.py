@@ -160,6 +160,58 @@ def test_a_box_before_the_wall_is_not_grown_onto_it():
     assert np.array_equal(grown >= 0, which >= 0)
 
 
+def room_with_skirting(H: int, W: int, height: float = 0.12, thickness: float = 0.02) -> np.ndarray:
+    """``turned_room`` with a skirting board along every wall: a slab ``height`` m tall standing
+    ``thickness`` m before the wall on the floor (its front and its top face are ray cast)."""
+    dirs = equirect_directions(H, W, dtype=torch.float64).numpy()
+    c, s = math.cos(YAW), math.sin(YAW)
+    d = dirs @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]]).T  # [H, W, 3] in the room's frame
+    t = turned_room(H, W)
+    top = HI[1] - height
+
+    def inside(p, i, other, lo, hi, y0, y1):  # p [H, W, 3] within the slab's extent
+        return (
+            (p[..., i] >= lo)
+            & (p[..., i] <= hi)
+            & (p[..., 1] >= y0)
+            & (p[..., 1] <= y1)
+            & (p[..., other] > LO[other])
+            & (p[..., other] < HI[other])
+        )
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for i, other in ((0, 2), (2, 0)):
+            for wall in (LO[i], HI[i]):
+                front = wall - np.sign(wall) * thickness
+                lo, hi = min(front, wall), max(front, wall)
+                for hit in (front / d[..., i], top / d[..., 1]):  # the front face, the top face
+                    ok = (hit > 0) & inside(hit[..., None] * d, i, other, lo, hi, top, HI[1]) & (hit < t)
+                    t = np.where(ok, hit, t)
+    return t
+
+
+def walls_of(facts: dict) -> np.ndarray:
+    """The offsets of the walls that bound the room, sorted."""
+    return np.sort([p["offset"] for p in facts["planes"] if p["bounds_room"] and p["axis"][1] == 0.0])
+
+
+def test_a_skirting_board_does_not_pull_the_walls_in(monkeypatch):
+    """The board's face lies within a wall plane's tolerance, 2 cm before it, right where the wall meets
+    the floor: read there, every wall comes out a per cent nearer. Read 3 deg into each plane, the walls
+    are where they are, and under a network's bias where they would be without the board."""
+    import holoflow.depth.planes as planes
+
+    want = np.sort([LO[0], LO[2], HI[0], HI[2]])
+    exact = room_with_skirting(256, 512)
+    assert (exact < turned_room(256, 512) - 1e-3).mean() > 0.005  # the boards are seen
+    assert np.allclose(walls_of(refine_with_planes(exact)[1]), want, rtol=1e-3)
+    bias = bias_field(256, 512)
+    plain = walls_of(refine_with_planes(turned_room(256, 512) * bias)[1])
+    assert np.allclose(walls_of(refine_with_planes(exact * bias)[1]), plain, rtol=1e-3)
+    monkeypatch.setattr(planes, "CONTACT_INSET_DEG", 0.0)  # read at the crease: the bias the inset removes
+    assert (walls_of(refine_with_planes(exact)[1]) / want - 1 < -0.005).all()
+
+
 def test_exact_depth_stays_as_it_is():
     truth = turned_room()
     out, facts = refine_with_planes(truth)
