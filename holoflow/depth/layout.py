@@ -102,10 +102,14 @@ class LayoutConfig:
     units per unit of evidence); only segments along that wall's own horizontal direction count."""
     ceiling_line_deg: float = 30.0
     """Manhattan fit: a wall seen over at least this many degrees whose ceiling line no segment shows
-    (under 20 % of its columns) moves to the nearer wall of its direction whose ceiling line segments
-    show best (in at least 60 % of them): a sofa or a cupboard along a wall draws its top where the
-    wall's foot would be, nothing stands in front of the ceiling's edge (manhattan.nearer_ceiling_lines);
+    (under 20 % of its columns) moves to the wall of its direction whose ceiling line segments show
+    best (in at least 60 % of them): a sofa or a cupboard along a wall draws its top where the wall's
+    foot would be, nothing stands in front of the ceiling's edge (manhattan.walls_to_ceiling_lines);
     0 = off."""
+    ceiling_line_outward: float = 1.2
+    """Manhattan fit: the farthest that rule moves a wall outwards, as a factor of its offset: a hearth,
+    a step or a rug's edge before a wall draws its foot's line a hand's breadth to half a metre in front
+    of it, while a farther line under a wall's ceiling is a cupboard's top (1 = only ever nearer)."""
 
 
 @dataclass
@@ -419,10 +423,10 @@ def _manhattan_walls(srgb, cost_f, cost_c, pc, h, cfg, facts):
     from holoflow.depth.manhattan import (
         manhattan_dp,
         manhattan_yaw,
-        nearer_ceiling_lines,
         segment_evidence,
         segment_rays,
         wall_distances,
+        walls_to_ceiling_lines,
     )
 
     Hk, Wk = cost_f.shape
@@ -462,7 +466,10 @@ def _manhattan_walls(srgb, cost_f, cost_c, pc, h, cfg, facts):
         below = 1.0 - sum(pc[np.minimum(rc + k, Hk - 1), cols] for k in (2, 3, 4)) / 3.0  # [S, Wk]
         support = np.where(valid, ev_c[fam, rc, cols] * below, 0.0)  # [S, Wk] each wall's ceiling line seen
         min_run = int(np.ceil(cfg.ceiling_line_deg / 360.0 * Wk))
-        path, facts["manhattan"]["walls_to_ceiling_lines"] = nearer_ceiling_lines(path, support, len(offsets), min_run)
+        outward = int(np.log(cfg.ceiling_line_outward) / np.log(offsets[1] / offsets[0]) + 1e-9)  # offsets
+        path, facts["manhattan"]["walls_to_ceiling_lines"] = walls_to_ceiling_lines(
+            path, support, len(offsets), min_run, outward
+        )
         corners = int(np.count_nonzero(path != np.roll(path, 1)))
     facts["ceiling_above_eye_m"] = round(float(ceiling), 3)
     facts["manhattan"]["walls"] = corners

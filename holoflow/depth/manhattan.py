@@ -15,9 +15,10 @@ The panorama is assumed upright (tilt already corrected, ``vanishing.py``).
   (metres) is seen at horizontal distance a / cos(phi - alpha) in column phi; the DP picks one wall
   (4 orientations x offsets) per column with a constant penalty per corner, so the layout is a
   Manhattan polygon (with occlusion jumps allowed) rather than a free per-column distance.
-- ``nearer_ceiling_lines``: a wall the fit put where its foot's line is, whose ceiling line no segment
-  shows while a nearer wall's of the same direction does, moves to that nearer wall (furniture along a
-  wall draws lines where its foot would be; nothing stands in front of the ceiling's edge).
+- ``walls_to_ceiling_lines``: a wall the fit put where its foot's line is, whose ceiling line no segment
+  shows while another wall's of the same direction does, moves to that wall: a nearer one (furniture
+  along a wall draws lines where its foot would be; nothing stands in front of the ceiling's edge) or
+  one a few offsets farther (a hearth, a step or a rug's edge before it draws the foot's line).
 """
 
 from __future__ import annotations
@@ -172,15 +173,22 @@ def manhattan_dp(cost: np.ndarray, corner: float) -> np.ndarray:
     return path[pad : pad + W]
 
 
-def nearer_ceiling_lines(
-    path: np.ndarray, support: np.ndarray, offsets: int, min_run: int, seen: float = 0.6, missing: float = 0.2
+def walls_to_ceiling_lines(
+    path: np.ndarray,
+    support: np.ndarray,
+    offsets: int,
+    min_run: int,
+    outward: int = 0,
+    seen: float = 0.6,
+    missing: float = 0.2,
 ) -> tuple[np.ndarray, int]:
     """The wall states [W] of ``manhattan_dp``'s ``path`` with every run of one state over at least
-    ``min_run`` neighbouring columns (wrapping) moved to a nearer wall of the same direction when the
+    ``min_run`` neighbouring columns (wrapping) moved to another wall of the same direction when the
     ceiling line of its own wall is seen in under ``missing`` of its columns and that of the wall with
-    the best seen line, a nearer one, in at least ``seen`` of them. ``support`` [S, W]: the ceiling-line
-    evidence (0..1) of each state in each column; states s = o ``offsets`` + k, offsets ascending (the
-    layout of ``wall_distances``). Returns (the new path [W], how many runs moved)."""
+    the best seen line in at least ``seen`` of them. The other wall is any nearer one or one at most
+    ``outward`` offsets farther. ``support`` [S, W]: the ceiling-line evidence (0..1) of each state in
+    each column; states s = o ``offsets`` + k, offsets ascending (the layout of ``wall_distances``).
+    Returns (the new path [W], how many runs moved)."""
     W = len(path)
     path = path.copy()
     starts = np.nonzero(path != np.roll(path, 1))[0]
@@ -194,8 +202,10 @@ def nearer_ceiling_lines(
             continue
         o, k = divmod(int(path[run[0]]), offsets)
         score = support[o * offsets : (o + 1) * offsets][:, run].mean(1)  # [K] share of columns with a line
-        best = int(np.argmax(score))
-        if best < k and score[best] >= seen and score[k] < missing:
+        reach = score[: min(k + outward + 1, offsets)].copy()  # the walls it may move to
+        reach[k] = -1.0
+        best = int(np.argmax(reach))
+        if score[best] >= seen and score[k] < missing:
             path[run] = o * offsets + best
             moved += 1
     return path, moved

@@ -9,10 +9,10 @@ from holoflow.depth.layout import LayoutConfig, estimate_layout_depth
 from holoflow.depth.manhattan import (
     manhattan_dp,
     manhattan_yaw,
-    nearer_ceiling_lines,
     panorama_yaw,
     segment_evidence,
     wall_distances,
+    walls_to_ceiling_lines,
 )
 
 
@@ -173,7 +173,7 @@ def test_a_wall_without_its_ceiling_line_moves_to_the_nearer_one_that_has_it():
     ceiling line while the near wall's shows over the whole run: the run moves to the near wall."""
     path, support, K = _two_walls()
     support[2, 60:] = 1.0  # the ceiling line of wall (0, 2), nearer than (0, 4)
-    out, moved = nearer_ceiling_lines(path, support, K, min_run=30)
+    out, moved = walls_to_ceiling_lines(path, support, K, min_run=30)
     assert moved == 1
     assert (out[60:] == 2).all() and (out[:60] == 1).all()
 
@@ -181,19 +181,31 @@ def test_a_wall_without_its_ceiling_line_moves_to_the_nearer_one_that_has_it():
 def test_a_wall_keeps_its_offset_when_its_own_line_shows_or_the_run_is_narrow_or_the_line_is_farther():
     path, support, K = _two_walls()
     support[2, 60:] = 1.0
-    assert nearer_ceiling_lines(path, support, K, min_run=41)[1] == 0  # a doorway's width: left alone
+    assert walls_to_ceiling_lines(path, support, K, min_run=41)[1] == 0  # a doorway's width: left alone
     own = support.copy()
     own[4, 60:70] = 1.0  # its own line in a quarter of its columns
-    assert nearer_ceiling_lines(path, own, K, min_run=30)[1] == 0
+    assert walls_to_ceiling_lines(path, own, K, min_run=30)[1] == 0
     farther = np.zeros_like(support)
-    farther[3, :60] = 1.0  # the first run's best line lies farther than its wall: never moved outwards
-    out, moved = nearer_ceiling_lines(path, farther, K, min_run=30)
+    farther[3, :60] = 1.0  # the first run's best line lies farther than its wall: not moved outwards
+    out, moved = walls_to_ceiling_lines(path, farther, K, min_run=30)
     assert moved == 0 and (out == path).all()
+    out, moved = walls_to_ceiling_lines(path, farther, K, min_run=30, outward=1)  # two offsets out: too far
+    assert moved == 0 and (out == path).all()
+
+
+def test_a_wall_behind_a_hearth_moves_out_to_its_ceiling_line_within_reach():
+    """A hearth before a chimney breast draws the breast's foot line in front of it, and the breast's
+    ceiling line shows one offset farther: with ``outward`` >= 1 the run moves out to it."""
+    path, support, K = _two_walls()
+    support[2, :60] = 1.0  # the ceiling line of wall (0, 2), one offset beyond the first run's (0, 1)
+    out, moved = walls_to_ceiling_lines(path, support, K, min_run=30, outward=1)
+    assert moved == 1
+    assert (out[:60] == 2).all() and (out[60:] == 4).all()
 
 
 def test_one_wall_all_round_is_one_run():
     K, W = 5, 64
     path, support = np.full(W, 3), np.zeros((4 * K, W))
     support[1] = 1.0
-    out, moved = nearer_ceiling_lines(path, support, K, min_run=10)
+    out, moved = walls_to_ceiling_lines(path, support, K, min_run=10)
     assert moved == 1 and (out == 1).all()
