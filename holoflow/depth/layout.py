@@ -82,6 +82,13 @@ class LayoutConfig:
     """number of wall offsets (log-spaced, min_depth..max_depth_indoor, metres) per wall orientation."""
     corner_penalty: float = 80.0
     """cost (row-cost units, like the data costs) of each change of wall between neighbouring columns."""
+    corner_meet: float = 0.35
+    """Manhattan fit: the share of ``corner_penalty`` a corner costs where its two walls meet (their
+    distances in that column within ``corner_meet_tol``): a room's corners, a chimney breast's or a
+    bay's sides, against a jump from a wall to another one behind it (1 = every corner the same)."""
+    corner_meet_tol: float = 0.2
+    """Manhattan fit: log-distance difference (about a fraction) over which a corner's cost rises from
+    ``corner_meet`` to the whole ``corner_penalty``."""
     ceiling_steps: int = 29
     """number of ceiling heights (log-spaced, 0.3..2.5 x camera_height above the eye) tried by the
     Manhattan fit (each one a DP over the columns)."""
@@ -458,8 +465,11 @@ def _manhattan_walls(srgb, cost_f, cost_c, pc, h, cfg, facts):
         total = float(data[path, cols[0]].sum()) + cfg.corner_penalty * corners
         total += Wk * cfg.ceiling_prior * (np.log(ceiling / cfg.typical_ceiling) / 0.5) ** 2
         if best is None or total < best[0]:
-            best = (total, ceiling, path, corners, rc)
-    _, ceiling, path, corners, rc = best
+            best = (total, ceiling, path, corners, rc, data)
+    _, ceiling, path, corners, rc, data = best
+    if cfg.corner_meet < 1.0:  # again at the chosen height, with the corners where walls meet cheaper
+        path = manhattan_dp(data, cfg.corner_penalty, np.log(dW), cfg.corner_meet, cfg.corner_meet_tol)
+        corners = int(np.count_nonzero(path != np.roll(path, 1)))
     if cfg.ceiling_line_deg > 0:  # rc [S, Wk]: each wall's ceiling row at the chosen height
         # a wall's ceiling line: a segment there with the wall, not more ceiling, below it (a ceiling's
         # own tiles and lamps draw lines along the walls' directions too)

@@ -149,10 +149,49 @@ def wall_distances(yaw: float, offsets: np.ndarray, W: int, dmax: float) -> tupl
     return np.minimum(d, dmax).reshape(4 * K, W), valid.reshape(4 * K, W)
 
 
-def manhattan_dp(cost: np.ndarray, corner: float) -> np.ndarray:
-    """One state per column [W] minimising sum of ``cost`` [S, W] + ``corner`` x (number of state
-    changes between neighbouring columns); columns wrap (solved over the panorama extended by a
-    quarter turn on both sides, the middle kept)."""
+def manhattan_dp(
+    cost: np.ndarray, corner: float, log_dist: np.ndarray | None = None, meet: float = 1.0, meet_tol: float = 0.2
+) -> np.ndarray:
+    """One state per column [W] minimising sum of ``cost`` [S, W] + the corners' costs; columns wrap
+    (solved over the panorama extended by a quarter turn on both sides, the middle kept).
+
+    A change of state between neighbouring columns costs ``corner``. With ``log_dist`` [S, W] (each
+    state's log horizontal distance) and ``meet`` < 1, a change between two walls that meet there
+    costs less: ``corner`` x (meet + (1 - meet) min(1, |log d - log d'| / meet_tol)), so a room's
+    real corners (depth continuous) come cheaper than jumps from one wall to another behind it."""
+    if log_dist is None or meet >= 1.0:
+        return _dp_constant_corner(cost, corner)
+    return _dp_meeting_corners(cost, corner, log_dist, meet, meet_tol)
+
+
+def _dp_meeting_corners(
+    cost: np.ndarray, corner: float, log_dist: np.ndarray, meet: float, meet_tol: float
+) -> np.ndarray:
+    """``manhattan_dp`` with each corner's cost from the two walls' distances: O(S^2) per column."""
+    S, W = cost.shape
+    pad = min(W, max(1, W // 4))
+    ext = np.concatenate([cost[:, -pad:], cost, cost[:, :pad]], axis=1)  # [S, W + 2 pad]
+    lde = np.concatenate([log_dist[:, -pad:], log_dist, log_dist[:, :pad]], axis=1)
+    n = ext.shape[1]
+    acc = ext[:, 0].copy()
+    came = np.zeros((n, S), dtype=np.int64)  # each state's best predecessor
+    states = np.arange(S)
+    for c in range(1, n):
+        gap = np.minimum(np.abs(lde[:, c, None] - lde[None, :, c]) / meet_tol, 1.0)  # [S prev, S]
+        step = corner * (meet + (1.0 - meet) * gap)
+        step[states, states] = 0.0
+        total = acc[:, None] + step
+        came[c] = np.argmin(total, axis=0)
+        acc = total[came[c], states] + ext[:, c]
+    path = np.empty(n, dtype=np.int64)
+    path[-1] = int(np.argmin(acc))
+    for c in range(n - 1, 0, -1):
+        path[c - 1] = came[c, path[c]]
+    return path[pad : pad + W]
+
+
+def _dp_constant_corner(cost: np.ndarray, corner: float) -> np.ndarray:
+    """``manhattan_dp`` with every corner at ``corner``: O(S) per column (the best predecessor or stay)."""
     S, W = cost.shape
     pad = min(W, max(1, W // 4))
     ext = np.concatenate([cost[:, -pad:], cost, cost[:, :pad]], axis=1)  # [S, W + 2 pad]

@@ -4,9 +4,11 @@ synthetic rectangular room (rotated, off-centre) rendered from known geometry an
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from holoflow.depth.layout import LayoutConfig, estimate_layout_depth
 from holoflow.depth.manhattan import (
+    _dp_meeting_corners,
     manhattan_dp,
     manhattan_yaw,
     panorama_yaw,
@@ -98,6 +100,35 @@ def test_wall_distances_and_dp_recover_a_piecewise_room():
     np.testing.assert_array_equal(manhattan_dp(cost, 5.0), truth)  # an integer path: exact on any CPU
 
 
+def _path_cost(cost, path, corner):
+    return float(cost[path, np.arange(cost.shape[1])].sum()) + corner * int(np.count_nonzero(path != np.roll(path, 1)))
+
+
+def test_meeting_corners_dp_with_every_corner_whole_matches_the_constant_corner_dp():
+    """The O(S^2) DP (``_dp_meeting_corners``) at meet = 1 finds a path as cheap as the O(S) one."""
+    rng = np.random.default_rng(3)
+    cost = rng.uniform(0, 1, (12, 80))
+    cost[rng.integers(0, 12, 80), np.arange(80)] -= 2.0
+    log_dist = rng.uniform(0, 1, (12, 80))
+    fast = manhattan_dp(cost, 1.5)
+    slow = _dp_meeting_corners(cost, 1.5, log_dist, 1.0, 0.2)
+    np.testing.assert_allclose(_path_cost(cost, slow, 1.5), _path_cost(cost, fast, 1.5), rtol=1e-12)
+
+
+@pytest.mark.parametrize("jump, expected", [(0.0, 1), (1.0, 0)])
+def test_a_corner_where_two_walls_meet_costs_less_than_a_jump_behind(jump, expected):
+    """Wall 1 is cheaper than wall 0 over half the columns by 1 per column (50 in all); two corners at
+    40 each are not worth it, at 0.35 x 40 where the walls meet (equal distances) they are."""
+    W = 100
+    cost = np.zeros((2, W))
+    cost[0, 50:] = 1.0
+    cost[1, :50] = 1.0
+    log_dist = np.stack([np.zeros(W), np.full(W, jump)])
+    path = manhattan_dp(cost, 40.0, log_dist, meet=0.35, meet_tol=0.2)
+    assert (path[60:90] == expected).all() and (path[10:40] == 0).all()
+    assert (manhattan_dp(cost, 40.0) == 0).all()  # constant corners: no switch
+
+
 _COLOURS = np.array(
     [
         (0.10, 0.09, 0.08),
@@ -150,14 +181,15 @@ def test_panorama_yaw_reads_the_walls_heading_from_the_image_alone():
 def test_capped_region_cost_bridges_a_block_of_contradicting_columns():
     """A third of the columns painted floor-coloured from 3 to 35 deg below the horizon (a low,
     floor-coloured sofa or bed flooding the floor boundary): with the capped data term the Manhattan
-    walls of the rest of the room continue through the block; uncapped, the block pulls its walls out."""
+    walls of the rest of the room continue through the block; uncapped, the block pulls its walls out
+    (every corner at the whole penalty, so that the cap alone is measured)."""
     H, W, yaw, walls, h, ceiling = 256, 512, np.radians(25.0), [2.0, 3.2, 2.6, 4.0], 1.6, 1.1
     img, depth = _rendered_room(H, W, yaw, walls, h, ceiling)
     lat = np.pi / 2 - np.pi * (np.arange(H) + 0.5) / H
     rows = (lat < -np.radians(3)) & (lat > -np.radians(35))
     img[np.ix_(rows, np.arange(300, 300 + int(0.35 * W)))] = _COLOURS[0]
-    capped = estimate_layout_depth(img, LayoutConfig(scene="indoor"))
-    uncapped = estimate_layout_depth(img, LayoutConfig(scene="indoor", region_cap=0.0))
+    capped = estimate_layout_depth(img, LayoutConfig(scene="indoor", corner_meet=1.0))
+    uncapped = estimate_layout_depth(img, LayoutConfig(scene="indoor", region_cap=0.0, corner_meet=1.0))
     assert (np.abs(capped.depth - depth) / depth).mean() < 0.03
     assert (np.abs(uncapped.depth - depth) / depth).mean() > 0.05
 
