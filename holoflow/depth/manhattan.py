@@ -13,8 +13,9 @@ The panorama is assumed upright (tilt already corrected, ``vanishing.py``).
   family's horizontal direction, below the horizon (floor-wall candidates) and above it (ceiling-wall).
 - ``wall_distances`` / ``manhattan_dp``: a wall with horizontal normal at azimuth alpha and offset a
   (metres) is seen at horizontal distance a / cos(phi - alpha) in column phi; the DP picks one wall
-  (4 orientations x offsets) per column with a constant penalty per corner, so the layout is a
-  Manhattan polygon (with occlusion jumps allowed) rather than a free per-column distance.
+  (4 orientations x offsets) per column with a penalty per corner (less where the two walls meet than
+  where one stands behind the other), so the layout is a Manhattan polygon (with occlusion jumps
+  allowed) rather than a free per-column distance.
 - ``walls_to_ceiling_lines``: a wall the fit put where its foot's line is, whose ceiling line no segment
   shows while another wall's of the same direction does, moves to that wall: a nearer one (furniture
   along a wall draws lines where its foot would be; nothing stands in front of the ceiling's edge) or
