@@ -296,7 +296,7 @@ def contact_offsets(
     # corner (the bias is smooth), so s_a / s_b = (r_a . axis_a) d_a / ((r_b . axis_b) d_b)
     qa = np.einsum("mk,mk->m", ra, axes[pa]) * da
     qb = np.einsum("mk,mk->m", rb, axes[pb]) * db
-    signs = np.sign([p[1] for p in planes])
+    signs = np.sign(fits)
     ok = (np.sign(qa) == signs[pa]) & (np.sign(qb) == signs[pb])
     logq = np.log(np.abs(qa[ok]) / np.abs(qb[ok]))
     lo, hi = np.minimum(pa[ok], pb[ok]), np.maximum(pa[ok], pb[ok])
