@@ -107,6 +107,12 @@ class LayoutConfig:
     segment_weight: float = 20.0
     """weight of the Manhattan-aligned line segments at a wall's floor / ceiling boundary (row-cost
     units per unit of evidence); only segments along that wall's own horizontal direction count."""
+    trim_line_weight: float = 0.5
+    """Manhattan fit: the share of its weight a segment keeps as a wall's foot (ceiling line) where the
+    rows 2-4 below (above) it are not the floor's (ceiling's) colour: a skirting board's top edge and a
+    cornice's lower edge run along the wall like its foot and its ceiling line, one trim's height inside
+    them, and together they fit a wall 15-20 % too far (manhattan.region_beyond; 1 = every segment
+    counts fully)."""
     ceiling_line_deg: float = 30.0
     """Manhattan fit: a wall seen over at least this many degrees whose ceiling line no segment shows
     (under 20 % of its columns) moves to the wall of its direction whose ceiling line segments show
@@ -396,7 +402,7 @@ def _estimate(srgb, cfg, facts, H0, W0):
     prior = cfg.distance_prior * (np.log(dist / cfg.typical_distance) / 0.7) ** 2
     data_f = cost_f[row_f] + prior[:, None]  # [K, Wk]
     if scene == "indoor" and cfg.manhattan:
-        d = _manhattan_walls(srgb, cost_f, cost_c, pc, h, cfg, facts)
+        d = _manhattan_walls(srgb, cost_f, cost_c, pf, pc, h, cfg, facts)
         if d is not None:
             return _finish(d, facts["ceiling_above_eye_m"], frame)
     best = None
@@ -420,16 +426,17 @@ def _estimate(srgb, cfg, facts, H0, W0):
     return _finish(dist[k], ceiling, frame)
 
 
-def _manhattan_walls(srgb, cost_f, cost_c, pc, h, cfg, facts):
+def _manhattan_walls(srgb, cost_f, cost_c, pf, pc, h, cfg, facts):
     """Horizontal wall distance per column [Wk] (metres) from the Manhattan wall DP (manhattan.py), its
     walls moved to the ceiling's lines where furniture along them mimics their foot (``ceiling_line_deg``;
-    pc [Hk, Wk]: the ceiling's colour probability), or None when no Manhattan yaw is found; sets facts
-    manhattan / ceiling_above_eye_m."""
+    pf / pc [Hk, Wk]: the floor's / ceiling's colour probability), or None when no Manhattan yaw is
+    found; sets facts manhattan / ceiling_above_eye_m."""
     import scipy.ndimage as ndi
 
     from holoflow.depth.manhattan import (
         manhattan_dp,
         manhattan_yaw,
+        region_beyond,
         segment_evidence,
         segment_rays,
         wall_distances,
@@ -447,6 +454,9 @@ def _manhattan_walls(srgb, cost_f, cost_c, pc, h, cfg, facts):
     ev_f, ev_c = segment_evidence(p1, p2, nrm, yaw, Hk, Wk)  # [2, Hk, Wk] each
     ev_f = ndi.maximum_filter1d(ev_f, 3, axis=1)  # +-1 row: a line sits on either side of the boundary
     ev_c = ndi.maximum_filter1d(ev_c, 3, axis=1)
+    if cfg.trim_line_weight < 1.0:  # a foot has the floor below it, a ceiling line the ceiling above it
+        ev_f = region_beyond(ev_f, pf, 1, cfg.trim_line_weight)
+        ev_c = region_beyond(ev_c, pc, -1, cfg.trim_line_weight)
     dmax = cfg.max_depth_indoor
     offsets = np.exp(np.linspace(np.log(cfg.min_depth), np.log(dmax), cfg.wall_offsets))  # [K] metres
     dW, valid = wall_distances(yaw, offsets, Wk, dmax)  # [S, Wk], S = 4 K

@@ -92,6 +92,17 @@ def panorama_yaw(srgb8: np.ndarray) -> tuple[float | None, dict]:
     return manhattan_yaw(normals, lengths)
 
 
+def region_beyond(evidence: np.ndarray, prob: np.ndarray, side: int, keep: float) -> np.ndarray:
+    """Boundary evidence [..., H, W] weighted by the region that lies beyond each row: ``keep`` + (1 -
+    ``keep``) x the mean of prob [H, W] (a region's colour probability) over the rows 2-4 past it on
+    ``side`` (+1: below, where a wall's foot has the floor; -1: above, where its ceiling line has the
+    ceiling); the row next to a line shares its blur. Rows past the image's edge repeat its last row."""
+    H = prob.shape[0]
+    rows = np.arange(H)
+    beyond = sum(prob[np.clip(rows + side * k, 0, H - 1)] for k in (2, 3, 4)) / 3.0  # [H, W]
+    return evidence * (keep + (1.0 - keep) * beyond)
+
+
 def segment_evidence(
     p1: np.ndarray,
     p2: np.ndarray,

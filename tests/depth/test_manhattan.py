@@ -12,6 +12,7 @@ from holoflow.depth.manhattan import (
     manhattan_dp,
     manhattan_yaw,
     panorama_yaw,
+    region_beyond,
     segment_evidence,
     wall_distances,
     walls_to_ceiling_lines,
@@ -164,6 +165,43 @@ def test_layout_recovers_a_rendered_manhattan_room():
     assert np.isfinite(est.depth).all()
     assert np.median(rel) < 0.05 and rel.mean() < 0.12, (np.median(rel), rel.mean(), est.facts)
     assert abs(est.facts["ceiling_above_eye_m"] - ceiling) / ceiling < 0.15
+
+
+def test_region_beyond_keeps_the_lines_with_the_region_past_them():
+    """A line keeps its whole weight where the region fills the rows past it on its side, ``keep``
+    where none of it does: the floor below a wall's foot, the ceiling above its ceiling line."""
+    H, W = 20, 3
+    floor = (np.arange(H) >= 12)[:, None] * np.ones((1, W))  # rows 12.. are floor
+    ev = np.ones((2, H, W))
+    below = region_beyond(ev, floor, 1, 0.3)
+    assert np.allclose(below[:, 12], 1.0) and np.allclose(below[:, 5], 0.3)  # the foot, a line on the wall
+    ceiling = (np.arange(H) < 6)[:, None] * np.ones((1, W))  # rows ..5 are ceiling
+    above = region_beyond(ev, ceiling, -1, 0.3)
+    assert np.allclose(above[:, 6], 1.0) and np.allclose(above[:, 14], 0.3)
+    assert np.allclose(region_beyond(ev, floor, 1, 1.0), ev)  # keep 1: off
+
+
+def test_a_skirting_boards_top_edge_is_not_taken_for_the_walls_foot():
+    """A white skirting board 0.15 m high whose top edge is the only line near the walls' foot (no line
+    where it meets the floor, as on a wooden floor): a line with the skirting, not the floor, below it
+    counts for half, so the walls stand at their foot; counted whole, the board's top edge puts them
+    8 % too far, with the ceiling as much too high."""
+    H, W, yaw, walls, h, ceiling = 256, 512, np.radians(25.0), [2.0, 3.2, 2.6, 4.0], 1.6, 1.1
+    depth, sid = _box(H, W, yaw, walls, h, ceiling)
+    below_eye = -depth * np.sin(np.pi / 2 - np.pi * (np.arange(H) + 0.5) / H)[:, None]  # metres
+    sid = np.where((sid >= 2) & (below_eye > h - 0.15), 6, sid)  # 6: the skirting
+    colours = np.concatenate([_COLOURS, [(0.9, 0.9, 0.88)]]).astype(np.float32)
+    colours[1] = 0.55  # a grey ceiling over white trim
+    img = colours[sid]
+    edge = np.zeros((H, W), bool)
+    edge[1:] = (sid[1:] != sid[:-1]) & ~((sid[1:] == 0) & (sid[:-1] == 6))
+    edge[:, 1:] |= sid[:, 1:] != sid[:, :-1]
+    img[edge] = 0.03
+    img *= np.exp(np.random.default_rng(0).normal(0, 0.02, img.shape)).astype(np.float32)
+    est = estimate_layout_depth(img, LayoutConfig(scene="indoor"))
+    whole = estimate_layout_depth(img, LayoutConfig(scene="indoor", trim_line_weight=1.0))
+    assert np.median(np.abs(est.depth - depth) / depth) < 0.02
+    assert np.median(whole.depth / depth) > 1.05
 
 
 def test_panorama_yaw_reads_the_walls_heading_from_the_image_alone():
