@@ -176,14 +176,23 @@ def manhattan_dp(
     return _dp_meeting_corners(cost, corner, log_dist, meet, meet_tol)
 
 
+def _wrap_pad(W: int) -> int:
+    """Columns the wrapping DPs add on each side: a quarter turn (at least 1, at most W)."""
+    return min(W, max(1, W // 4))
+
+
+def _wrap(a: np.ndarray, pad: int) -> np.ndarray:
+    """[S, W] -> [S, W + 2 pad]: the panorama's last ``pad`` columns before it, its first after it."""
+    return np.concatenate([a[:, -pad:], a, a[:, :pad]], axis=1)
+
+
 def _dp_meeting_corners(
     cost: np.ndarray, corner: float, log_dist: np.ndarray, meet: float, meet_tol: float
 ) -> np.ndarray:
     """``manhattan_dp`` with each corner's cost from the two walls' distances: O(S^2) per column."""
     S, W = cost.shape
-    pad = min(W, max(1, W // 4))
-    ext = np.concatenate([cost[:, -pad:], cost, cost[:, :pad]], axis=1)  # [S, W + 2 pad]
-    lde = np.concatenate([log_dist[:, -pad:], log_dist, log_dist[:, :pad]], axis=1)
+    pad = _wrap_pad(W)
+    ext, lde = _wrap(cost, pad), _wrap(log_dist, pad)  # [S, W + 2 pad]
     n = ext.shape[1]
     acc = ext[:, 0].copy()
     came = np.zeros((n, S), dtype=np.int64)  # each state's best predecessor
@@ -205,8 +214,8 @@ def _dp_meeting_corners(
 def _dp_constant_corner(cost: np.ndarray, corner: float) -> np.ndarray:
     """``manhattan_dp`` with every corner at ``corner``: O(S) per column (the best predecessor or stay)."""
     S, W = cost.shape
-    pad = min(W, max(1, W // 4))
-    ext = np.concatenate([cost[:, -pad:], cost, cost[:, :pad]], axis=1)  # [S, W + 2 pad]
+    pad = _wrap_pad(W)
+    ext = _wrap(cost, pad)  # [S, W + 2 pad]
     n = ext.shape[1]
     acc = ext[:, 0].copy()
     stay = np.zeros((n, S), dtype=bool)  # True: came from the same state; else from the best one
